@@ -1,0 +1,418 @@
+"""The airspace simulator: numpy, vectorised over aircraft and over a batch of episodes.
+
+Two kinds of aircraft share the sky:
+
+* **controlled** aircraft (index ``m`` in ``0..M-1``): the ownship (``m = 0``) and the learning
+  intruders (``m = 1..``). They take one of the 27 actions every step.
+* **background** aircraft (index ``b`` in ``0..B-1``): airway traffic (``R`` routes times ``C``
+  slots each, first) and explicitly placed aircraft (last). They fly straight at constant speed
+  and level and never react.
+
+Arrays carry a leading episode axis ``E``; a single environment uses ``E = 1``. Every episode
+owns its seed, so episode ``e`` evolves identically whatever else is in the batch.
+
+One step (``dt_s``): the action is applied at the start (new heading, clipped speed, target
+level); every aircraft then flies a straight segment. Separation is judged over the whole
+segment (closest point of approach clipped to ``[0, dt_s]``); an aircraft changing level
+occupies both levels for that step. The goal test is swept the same way. Then aircraft at the
+end of their airway leave, and due spawns enter unless a controlled aircraft at the spawn
+level is within ``spawn_clearance_km``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cdr_bench.actions import TRIPLES
+from cdr_bench.scenarios.schema import ScenarioConfig
+from cdr_bench.sim.geometry import bearing_deg, closest_approach, heading_to_unit
+from cdr_bench.sim.units import KM_PER_S_PER_KT
+
+N_LEVELS = 3
+
+# Outcome codes of a controlled aircraft (0 while it flies).
+RUNNING, SUCCESS, NMAC, LOS, BOUNDARY, TIMEOUT = 0, 1, 2, 3, 4, 5
+OUTCOME_NAMES = {SUCCESS: "success", NMAC: "nmac", LOS: "los", BOUNDARY: "boundary",
+                 TIMEOUT: "timeout"}
+
+REWARD_TERMS = ("goal", "path", "boundary", "step", "timeout", "los", "nmac")
+"""Named reward terms. The goal part R_G sums the first five, the safety part R_S the last two."""
+GOAL_TERMS = REWARD_TERMS[:5]
+SAFETY_TERMS = REWARD_TERMS[5:]
+
+
+@dataclass
+class StepResult:
+    """What happened to every controlled aircraft during one step; arrays shaped (E, M).
+
+    ``los_with`` / ``nmac_with`` are (E, M, B + M): which other aircraft (background first, then
+    controlled) were in LoS / NMAC with it during the step.
+    """
+
+    acting: NDArray[np.bool_]
+    """aircraft that were flying at the start of the step"""
+    rewards: dict[str, NDArray[np.float64]]
+    """named reward terms, see :data:`REWARD_TERMS`"""
+    los_with: NDArray[np.bool_]
+    nmac_with: NDArray[np.bool_]
+    invalid_action: NDArray[np.bool_]
+    """a masked level change was requested (and not executed)"""
+    outside: NDArray[np.bool_]
+    """outside the sector at the end of the step"""
+    reached_goal: NDArray[np.bool_]
+    terminated: NDArray[np.bool_]
+    truncated: NDArray[np.bool_]
+    outcome: NDArray[np.int8]
+    """outcome code if the aircraft finished this step, else RUNNING"""
+    min_sep_km: NDArray[np.float64]
+    """smallest swept horizontal distance to any same-level aircraft (inf if none)"""
+
+
+class Simulator:
+    """A batch of ``n_episodes`` independent episodes of one scenario.
+
+    Call :meth:`reset` with one seed per episode (or a subset of episodes), then :meth:`step`
+    with one action index per controlled aircraft. Read state from the public arrays.
+    """
+
+    def __init__(self, config: ScenarioConfig, n_episodes: int = 1):
+        if n_episodes < 1:
+            raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+        self.config = config
+        self.E = n_episodes
+        cfg = config
+        self.size_km = cfg.sector.size_km
+        self.dt_s = cfg.time.dt_s
+        self.max_steps = cfg.time.max_steps
+
+        # Airways (the first `routes` of the network carry traffic).
+        R = cfg.traffic.routes
+        n = cfg.traffic.per_route
+        self.R, self.per_route = R, n
+        self.C = n + 2 if R else 0  # slots per route: n in steady state, spare for delayed spawns
+        ways = cfg.airways[:R]
+        self.route_start_km = np.array([w.start_km for w in ways], dtype=float).reshape(R, 2)
+        route_end = np.array([w.end_km for w in ways], dtype=float).reshape(R, 2)
+        vec = route_end - self.route_start_km
+        self.route_length_km = np.linalg.norm(vec, axis=1)
+        self.route_unit = vec / np.maximum(self.route_length_km, 1e-9)[:, None]
+        self.route_spacing_km = self.route_length_km / max(n, 1)
+        self.traffic_speed_km_s = cfg.traffic.speed_kt * KM_PER_S_PER_KT
+        self.X = len(cfg.aircraft)
+        self.B = R * self.C + self.X
+        self.slot_route = np.repeat(np.arange(R), self.C)  # (R*C,)
+
+        # Controlled aircraft: ownship + learning intruders.
+        self.M = 1 + cfg.n_learning_intruders
+        o = cfg.ownship
+        self.min_speed_kt, self.max_speed_kt = o.min_speed_kt, o.max_speed_kt
+        self.heading_step_deg, self.speed_step_kt = o.heading_step_deg, o.speed_step_kt
+        self.los_km, self.nmac_km = cfg.separation.los_km, cfg.separation.nmac_km
+
+        E, B, M = self.E, self.B, self.M
+        self.bg_pos_km = np.zeros((E, B, 2))
+        self.bg_vel_km_s = np.zeros((E, B, 2))
+        self.bg_level = np.zeros((E, B), dtype=np.int64)
+        self.bg_active = np.zeros((E, B), dtype=bool)
+        self.bg_arc_km = np.zeros((E, R * self.C))
+        self.route_last_arc_km = np.zeros((E, R))
+        self.route_spawn_count = np.zeros((E, R), dtype=np.int64)
+        self.route_waiting = np.zeros((E, R), dtype=bool)
+
+        self.ac_pos_km = np.zeros((E, M, 2))
+        self.ac_heading_deg = np.zeros((E, M))
+        self.ac_speed_kt = np.zeros((E, M))
+        self.ac_level = np.zeros((E, M), dtype=np.int64)
+        self.ac_active = np.zeros((E, M), dtype=bool)
+        self.ac_goal_km = np.zeros((E, M, 2))
+        self.ac_outcome = np.zeros((E, M), dtype=np.int8)
+        self.steps = np.zeros(E, dtype=np.int64)
+        self._eye = np.eye(M, dtype=bool)[None]
+
+    # ------------------------------------------------------------------------------------------
+    # Reset
+
+    def reset(self, seeds: list[int] | NDArray[np.integer], episodes: NDArray[np.integer] | None
+              = None) -> None:
+        """Start episodes ``episodes`` (default: all) from ``seeds`` (one per episode)."""
+        idx = np.arange(self.E) if episodes is None else np.asarray(episodes)
+        seeds = list(np.asarray(seeds).reshape(-1))
+        if len(seeds) != len(idx):
+            raise ValueError(f"expected {len(idx)} seeds, got {len(seeds)}")
+        for e, seed in zip(idx, seeds):
+            self._reset_one(int(e), np.random.default_rng(int(seed)))
+
+    def _reset_one(self, e: int, rng: np.random.Generator) -> None:
+        cfg = self.config
+        for _attempt in range(200):
+            self._populate_traffic(e, rng)
+            if self._place_controlled(e, rng):
+                break
+        else:
+            raise RuntimeError(
+                f"scenario {cfg.id!r}: no start with the required clearance found in 200 draws"
+            )
+        self.ac_outcome[e] = RUNNING
+        self.ac_active[e] = True
+        self.steps[e] = 0
+
+    def _populate_traffic(self, e: int, rng: np.random.Generator) -> None:
+        """Steady state: each route holds ``per_route`` aircraft one spacing apart, random phase."""
+        R, C, n = self.R, self.C, self.per_route
+        self.bg_active[e] = False
+        if R:
+            phase = rng.uniform(0.0, 1.0, R) * self.route_spacing_km  # arc of the newest, km
+            last_level = rng.integers(0, N_LEVELS, R)
+            j = np.arange(n)
+            arcs = phase[:, None] + j[None, :] * self.route_spacing_km[:, None]  # (R, n)
+            levels = (last_level[:, None] - j[None, :]) % N_LEVELS  # older ones spawned earlier
+            slot = (np.arange(R)[:, None] * C + j[None, :]).reshape(-1)
+            arcs_f = arcs.reshape(-1)
+            r_f = np.repeat(np.arange(R), n)
+            self.bg_arc_km[e] = 0.0
+            self.bg_arc_km[e, slot] = arcs_f
+            self.bg_pos_km[e, slot] = self.route_start_km[r_f] + arcs_f[:, None] * self.route_unit[r_f]
+            self.bg_vel_km_s[e, slot] = self.route_unit[r_f] * self.traffic_speed_km_s
+            self.bg_level[e, slot] = levels.reshape(-1)
+            self.bg_active[e, slot] = arcs_f < self.route_length_km[r_f]
+            self.route_last_arc_km[e] = phase
+            self.route_spawn_count[e] = last_level + 1
+            self.route_waiting[e] = False
+        for i, a in enumerate(self.config.aircraft):
+            b = R * C + i
+            self.bg_pos_km[e, b] = a.position_km
+            self.bg_vel_km_s[e, b] = heading_to_unit(np.array(a.heading_deg)) * (
+                a.speed_kt * KM_PER_S_PER_KT
+            )
+            self.bg_level[e, b] = a.level
+            self.bg_active[e, b] = True
+
+    def _clear_of_traffic(self, e: int, points_km: NDArray[np.float64], clearance_km: float,
+                          level: NDArray[np.integer] | None = None) -> NDArray[np.bool_]:
+        """Which candidate points are at least ``clearance_km`` from every background aircraft
+        (any level, or only those at ``level`` when given)."""
+        act = self.bg_active[e]
+        pos = self.bg_pos_km[e, act]
+        if pos.shape[0] == 0:
+            return np.ones(points_km.shape[0], dtype=bool)
+        d = np.linalg.norm(points_km[:, None, :] - pos[None], axis=-1)
+        if level is not None:
+            d = np.where(self.bg_level[e, act][None, :] == np.asarray(level)[:, None], d, np.inf)
+        return (d >= clearance_km).all(axis=1)
+
+    def _place_controlled(self, e: int, rng: np.random.Generator) -> bool:
+        cfg, o, size = self.config, self.config.ownship, self.size_km
+        clearance = o.start_clearance_km
+        # Learning intruders first: at the entry of their airway, on a level clear of traffic.
+        placed: list[NDArray[np.float64]] = []
+        for k, li in enumerate(cfg.learning_intruders, start=1):
+            way = cfg.airways[li.airway]
+            start = np.array(way.start_km, dtype=float)
+            levels = rng.permutation(N_LEVELS)
+            ok = self._clear_of_traffic(e, np.repeat(start[None], N_LEVELS, 0), clearance, levels)
+            if placed:
+                ok &= min(np.linalg.norm(start - p) for p in placed) >= clearance
+            if not ok.any():
+                return False
+            vec = np.subtract(way.end_km, way.start_km)
+            self.ac_pos_km[e, k] = start
+            self.ac_heading_deg[e, k] = bearing_deg(vec[0], vec[1])
+            self.ac_speed_kt[e, k] = o.speed_kt
+            self.ac_level[e, k] = levels[np.argmax(ok)]
+            self.ac_goal_km[e, k] = way.end_km
+            placed.append(start)
+        # Ownship.
+        if o.start is not None:
+            assert o.goal_km is not None
+            self.ac_pos_km[e, 0] = o.start.position_km
+            self.ac_heading_deg[e, 0] = o.start.heading_deg
+            self.ac_speed_kt[e, 0] = o.start.speed_kt
+            self.ac_level[e, 0] = o.start.level
+            self.ac_goal_km[e, 0] = o.goal_km
+            return True
+        goal = rng.uniform(o.goal_margin_km, size - o.goal_margin_km, 2)
+        level = rng.integers(0, N_LEVELS)
+        n_cand = 64
+        perim = rng.uniform(0.0, 4.0 * size, n_cand)
+        side, u = np.divmod(perim, size)
+        cand = np.select(
+            [side[:, None] == 0, side[:, None] == 1, side[:, None] == 2],
+            [np.stack([u, np.zeros_like(u)], 1), np.stack([np.full_like(u, size), u], 1),
+             np.stack([size - u, np.full_like(u, size)], 1)],
+            np.stack([np.zeros_like(u), size - u], 1),
+        )
+        ok = self._clear_of_traffic(e, cand, clearance)
+        for p in placed:
+            ok &= np.linalg.norm(cand - p, axis=1) >= clearance
+        if not ok.any():
+            return False
+        start = cand[np.argmax(ok)]
+        self.ac_pos_km[e, 0] = start
+        self.ac_heading_deg[e, 0] = bearing_deg(goal[0] - start[0], goal[1] - start[1])
+        self.ac_speed_kt[e, 0] = o.speed_kt
+        self.ac_level[e, 0] = level
+        self.ac_goal_km[e, 0] = goal
+        return True
+
+    # ------------------------------------------------------------------------------------------
+    # Step
+
+    def velocities_km_s(self) -> NDArray[np.float64]:
+        """Velocity of every controlled aircraft, (E, M, 2) km/s."""
+        return heading_to_unit(self.ac_heading_deg) * (self.ac_speed_kt * KM_PER_S_PER_KT)[..., None]
+
+    def step(self, actions: NDArray[np.integer]) -> StepResult:
+        """Advance every episode by one step.
+
+        Args:
+            actions: (E, M) action indices in 0..26; entries of aircraft that are not flying
+                are ignored. Validation of the values is the caller's job.
+        """
+        cfg, dt = self.config, self.dt_s
+        acting = self.ac_active.copy()
+        live = acting.any(axis=1)  # (E,)
+        actions = np.asarray(actions).reshape(self.E, self.M)
+        trip = TRIPLES[np.where(acting, actions, 13)]  # (E, M, 3)
+
+        # 1. Apply the action at the start of the step.
+        old_level = self.ac_level
+        target = old_level + trip[..., 2]
+        invalid = acting & ((target < 0) | (target >= N_LEVELS))
+        new_level = np.where(invalid | ~acting, old_level, target)
+        heading = np.where(acting, np.mod(self.ac_heading_deg + trip[..., 0] * self.heading_step_deg,
+                                          360.0), self.ac_heading_deg)
+        speed = np.where(acting, np.clip(self.ac_speed_kt + trip[..., 1] * self.speed_step_kt,
+                                         self.min_speed_kt, self.max_speed_kt), self.ac_speed_kt)
+        self.ac_heading_deg, self.ac_speed_kt = heading, speed
+        ac_vel = self.velocities_km_s()
+        ac_vel = np.where(acting[..., None], ac_vel, 0.0)
+
+        # 2. Swept separation of every controlled aircraft against every other aircraft.
+        ac_occ = (1 << old_level) | (1 << new_level)  # levels occupied during the step (bitmask)
+        oth_pos = np.concatenate([self.bg_pos_km, self.ac_pos_km], axis=1)  # (E, N, 2)
+        oth_vel = np.concatenate([self.bg_vel_km_s, ac_vel], axis=1)
+        oth_occ = np.concatenate([1 << self.bg_level, ac_occ], axis=1)
+        oth_act = np.concatenate([self.bg_active, acting], axis=1)
+        d_min, _ = closest_approach(
+            oth_pos[:, None] - self.ac_pos_km[:, :, None], oth_vel[:, None] - ac_vel[:, :, None], dt
+        )  # (E, M, N)
+        judged = (ac_occ[:, :, None] & oth_occ[:, None, :]) != 0
+        judged &= oth_act[:, None, :] & acting[:, :, None]
+        judged[:, :, self.B:] &= ~self._eye
+        d_judged = np.where(judged, d_min, np.inf)
+        nmac_with = d_judged < self.nmac_km
+        los_with = d_judged < self.los_km
+        n_nmac = nmac_with.sum(axis=2)
+        n_los_only = los_with.sum(axis=2) - n_nmac
+
+        # 3. Swept goal test.
+        d_goal_min, _ = closest_approach(self.ac_goal_km - self.ac_pos_km, -ac_vel, dt)
+        reached = acting & (d_goal_min < cfg.ownship.goal_radius_km)
+
+        # 4. Move.
+        self.ac_pos_km = self.ac_pos_km + ac_vel * dt
+        self.ac_level = new_level
+        self.bg_pos_km = self.bg_pos_km + self.bg_vel_km_s * dt
+        self.steps = self.steps + live
+        self._advance_traffic(live)
+
+        # 5. Outcomes and rewards.
+        size = self.size_km
+        p = self.ac_pos_km
+        outside = acting & ((p[..., 0] < 0) | (p[..., 0] > size) | (p[..., 1] < 0) | (p[..., 1] > size))
+        has_nmac = n_nmac > 0
+        has_los = los_with.any(axis=2)
+        outcome = np.full(acting.shape, RUNNING, dtype=np.int8)
+        outcome[reached] = SUCCESS
+        if cfg.sector.boundary_terminates:
+            outcome[outside & ~reached] = BOUNDARY
+        if cfg.separation.los_terminates:
+            outcome[has_los] = LOS
+        outcome[has_nmac] = NMAC
+        outcome[~acting] = RUNNING
+        terminated = outcome != RUNNING
+        truncated = acting & ~terminated & (self.steps >= self.max_steps)[:, None]
+        outcome[truncated] = TIMEOUT
+
+        w = cfg.reward
+        d_goal = np.linalg.norm(self.ac_goal_km - p, axis=-1)
+        af = acting.astype(float)
+        rewards = {
+            "goal": w.goal * (outcome == SUCCESS),
+            "path": -w.path * (d_goal / size) ** 2 * af,
+            "boundary": -w.boundary * outside,
+            "step": -w.step * af,
+            "timeout": -w.timeout * truncated,
+            "los": -w.los * n_los_only,
+            "nmac": -w.nmac * n_nmac,
+        }
+        rewards = {k: v.astype(float) for k, v in rewards.items()}
+
+        finished = terminated | truncated
+        self.ac_outcome = np.where(finished, outcome, self.ac_outcome).astype(np.int8)
+        self.ac_active = acting & ~finished
+        return StepResult(
+            acting=acting, rewards=rewards, los_with=los_with, nmac_with=nmac_with,
+            invalid_action=invalid, outside=outside, reached_goal=reached,
+            terminated=terminated, truncated=truncated, outcome=outcome,
+            min_sep_km=d_judged.min(axis=2) if d_judged.shape[2] else np.full(acting.shape, np.inf),
+        )
+
+    def _advance_traffic(self, live: NDArray[np.bool_]) -> None:
+        """Airway aircraft leave at the end of their route; due spawns enter when clear."""
+        R, C = self.R, self.C
+        if self.X:
+            p = self.bg_pos_km[:, R * C:]
+            inside = (p[..., 0] >= 0) & (p[..., 0] <= self.size_km) & (p[..., 1] >= 0) & (
+                p[..., 1] <= self.size_km)
+            self.bg_active[:, R * C:] &= inside
+        if not R:
+            return
+        step_km = self.traffic_speed_km_s * self.dt_s
+        self.bg_arc_km += step_km
+        arr = self.bg_active[:, : R * C]
+        arr &= self.bg_arc_km < self.route_length_km[self.slot_route]
+
+        self.route_last_arc_km = self.route_last_arc_km + step_km * live[:, None]
+        due = (self.route_last_arc_km >= self.route_spacing_km) & live[:, None]
+        if not due.any():
+            return
+        arc = np.where(self.route_waiting, 0.0, self.route_last_arc_km - self.route_spacing_km)
+        level = self.route_spawn_count % N_LEVELS
+        pos = self.route_start_km + arc[..., None] * self.route_unit  # (E, R, 2)
+        d = np.linalg.norm(pos[:, :, None] - self.ac_pos_km[:, None], axis=-1)  # (E, R, M)
+        near = (d < self.config.traffic.spawn_clearance_km) & self.ac_active[:, None, :] & (
+            self.ac_level[:, None, :] == level[..., None])
+        blocked = near.any(axis=2)
+        spawn = due & ~blocked
+        self.route_waiting = due & blocked
+        if not spawn.any():
+            return
+        e_idx, r_idx = np.nonzero(spawn)
+        free = np.argmin(arr.reshape(self.E, R, C)[e_idx, r_idx], axis=1)
+        slot = r_idx * C + free
+        if arr[e_idx, slot].any():  # pragma: no cover - capacity is n + 2 by construction
+            raise RuntimeError("airway slot capacity exceeded")
+        self.bg_active[e_idx, slot] = True
+        self.bg_arc_km[e_idx, slot] = arc[e_idx, r_idx]
+        self.bg_pos_km[e_idx, slot] = pos[e_idx, r_idx]
+        self.bg_vel_km_s[e_idx, slot] = self.route_unit[r_idx] * self.traffic_speed_km_s
+        self.bg_level[e_idx, slot] = level[e_idx, r_idx]
+        self.route_last_arc_km[e_idx, r_idx] = arc[e_idx, r_idx]
+        self.route_spawn_count[e_idx, r_idx] += 1
+
+    # ------------------------------------------------------------------------------------------
+    # Derived quantities
+
+    def action_masks(self) -> NDArray[np.int8]:
+        """(E, M, 27) feasibility flags of every controlled aircraft."""
+        from cdr_bench.actions import action_mask
+
+        return action_mask(self.ac_level, N_LEVELS)
+
+    def intruder_count(self) -> NDArray[np.int64]:
+        """Active background aircraft per episode, (E,)."""
+        return self.bg_active.sum(axis=1)
