@@ -4,21 +4,35 @@
 >>> env = cdr_bench.parallel_env(scenario="medium")   # PettingZoo ParallelEnv
 >>> aec = cdr_bench.env(scenario="medium")            # PettingZoo AEC form
 >>> import gymnasium; g = gymnasium.make("cdr_bench/Ownship-v0", scenario="high")
+
+``cdr_bench.sim`` and ``cdr_bench.scenarios`` also work in an interpreter without PettingZoo or
+Gymnasium (the environment names are then unavailable).
 """
 
 from __future__ import annotations
 
-import gymnasium as _gym
+from typing import Any
 
 from cdr_bench import actions
-from cdr_bench.env import CDREnv, env, parallel_env
 from cdr_bench.scenarios import ScenarioConfig, ScenarioError, list_scenarios, load_scenario
 
 __version__ = "0.1.0"
 
-if "cdr_bench/Ownship-v0" not in _gym.registry:
-    _gym.register(id="cdr_bench/Ownship-v0", entry_point="cdr_bench.gym_env:OwnshipEnv",
-                  disable_env_checker=False)
+try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
+    # Bound eagerly: the function `env` must shadow the submodule `cdr_bench.env`.
+    from cdr_bench.env import CDREnv, env, parallel_env
+except ImportError as _e:  # pragma: no cover - simulator-only interpreter
+    _missing = _e
+
+    def __getattr__(name: str) -> Any:
+        if name in ("CDREnv", "env", "parallel_env"):
+            raise ImportError(f"cdr_bench.{name} needs PettingZoo and Gymnasium: {_missing}")
+        raise AttributeError(f"module 'cdr_bench' has no attribute {name!r}")
+else:
+    import gymnasium as _gym
+
+    if "cdr_bench/Ownship-v0" not in _gym.registry:
+        _gym.register(id="cdr_bench/Ownship-v0", entry_point="cdr_bench.gym_env:OwnshipEnv")
 
 __all__ = [
     "CDREnv",

@@ -95,4 +95,4 @@ def save_gif(frames: list[NDArray[np.uint8]], path: str, fps: int = 8) -> None:
     """Write frames as an animated GIF."""
     images = [Image.fromarray(f) for f in frames]
     images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
-                   loop=0, optimize=False)
+                   loop=0, optimize=False, format="GIF")

@@ -113,24 +113,37 @@ class Simulator:
         self.los_km, self.nmac_km = cfg.separation.los_km, cfg.separation.nmac_km
 
         E, B, M = self.E, self.B, self.M
-        self.bg_pos_km = np.zeros((E, B, 2))
-        self.bg_vel_km_s = np.zeros((E, B, 2))
-        self.bg_level = np.zeros((E, B), dtype=np.int64)
-        self.bg_active = np.zeros((E, B), dtype=bool)
+        N = B + M
+        self.N = N
+        # All aircraft in one set of arrays, background first (0..B-1), controlled last
+        # (B..B+M-1); the bg_* / ac_* attributes are views into them.
+        self.pos_km = np.zeros((E, N, 2))
+        self.vel_km_s = np.zeros((E, N, 2))
+        self.level = np.zeros((E, N), dtype=np.int64)
+        self.active = np.zeros((E, N), dtype=bool)
         self.bg_arc_km = np.zeros((E, R * self.C))
         self.route_last_arc_km = np.zeros((E, R))
         self.route_spawn_count = np.zeros((E, R), dtype=np.int64)
         self.route_waiting = np.zeros((E, R), dtype=bool)
 
-        self.ac_pos_km = np.zeros((E, M, 2))
         self.ac_heading_deg = np.zeros((E, M))
         self.ac_speed_kt = np.zeros((E, M))
-        self.ac_level = np.zeros((E, M), dtype=np.int64)
-        self.ac_active = np.zeros((E, M), dtype=bool)
         self.ac_goal_km = np.zeros((E, M, 2))
         self.ac_outcome = np.zeros((E, M), dtype=np.int8)
         self.steps = np.zeros(E, dtype=np.int64)
-        self._eye = np.eye(M, dtype=bool)[None]
+        not_self = np.ones((M, N), dtype=bool)
+        not_self[np.arange(M), B + np.arange(M)] = False
+        self._not_self = not_self[None]  # (1, M, N): a controlled aircraft is not its own neighbour
+        self._route_len_slot = self.route_length_km[self.slot_route]  # (R*C,)
+
+    # Views of the combined arrays (in-place writes go through to them).
+    bg_pos_km = property(lambda self: self.pos_km[:, : self.B], doc="(E, B, 2) km")
+    bg_vel_km_s = property(lambda self: self.vel_km_s[:, : self.B], doc="(E, B, 2) km/s")
+    bg_level = property(lambda self: self.level[:, : self.B], doc="(E, B) level index")
+    bg_active = property(lambda self: self.active[:, : self.B], doc="(E, B) in the sky")
+    ac_pos_km = property(lambda self: self.pos_km[:, self.B :], doc="(E, M, 2) km")
+    ac_level = property(lambda self: self.level[:, self.B :], doc="(E, M) level index")
+    ac_active = property(lambda self: self.active[:, self.B :], doc="(E, M) still flying")
 
     # ------------------------------------------------------------------------------------------
     # Reset
@@ -158,11 +171,14 @@ class Simulator:
         self.ac_outcome[e] = RUNNING
         self.ac_active[e] = True
         self.steps[e] = 0
+        ang = np.deg2rad(90.0 - self.ac_heading_deg[e])
+        self.vel_km_s.view(np.complex128)[e, self.B :, 0] = np.exp(1j * ang) * (
+            self.ac_speed_kt[e] * KM_PER_S_PER_KT)
 
     def _populate_traffic(self, e: int, rng: np.random.Generator) -> None:
         """Steady state: each route holds ``per_route`` aircraft one spacing apart, random phase."""
         R, C, n = self.R, self.C, self.per_route
-        self.bg_active[e] = False
+        self.active[e] = False
         if R:
             phase = rng.uniform(0.0, 1.0, R) * self.route_spacing_km  # arc of the newest, km
             last_level = rng.integers(0, N_LEVELS, R)
@@ -261,8 +277,14 @@ class Simulator:
     # Step
 
     def velocities_km_s(self) -> NDArray[np.float64]:
-        """Velocity of every controlled aircraft, (E, M, 2) km/s."""
-        return heading_to_unit(self.ac_heading_deg) * (self.ac_speed_kt * KM_PER_S_PER_KT)[..., None]
+        """Velocity of every controlled aircraft, (E, M, 2) km/s (zero once it has left)."""
+        return self.vel_km_s[:, self.B :]
+
+    def _set_controlled_velocity(self) -> None:
+        # heading h clockwise from north: (east, north) = (sin h, cos h) = Re/Im of e^{i(90°-h)}
+        ang = np.deg2rad(90.0 - self.ac_heading_deg)
+        vc = self.vel_km_s.view(np.complex128)[..., 0]
+        vc[:, self.B :] = np.exp(1j * ang) * (self.ac_speed_kt * KM_PER_S_PER_KT * self.ac_active)
 
     def step(self, actions: NDArray[np.integer]) -> StepResult:
         """Advance every episode by one step.
@@ -271,112 +293,106 @@ class Simulator:
             actions: (E, M) action indices in 0..26; entries of aircraft that are not flying
                 are ignored. Validation of the values is the caller's job.
         """
-        cfg, dt = self.config, self.dt_s
+        cfg, dt, B = self.config, self.dt_s, self.B
         acting = self.ac_active.copy()
         live = acting.any(axis=1)  # (E,)
-        actions = np.asarray(actions).reshape(self.E, self.M)
-        trip = TRIPLES[np.where(acting, actions, 13)]  # (E, M, 3)
+        trip = TRIPLES[np.where(acting, np.asarray(actions).reshape(self.E, self.M), 13)]
 
-        # 1. Apply the action at the start of the step.
-        old_level = self.ac_level
+        # 1. Apply the action at the start of the step (heading, clipped speed, target level).
+        old_level = self.ac_level.copy()
         target = old_level + trip[..., 2]
         invalid = acting & ((target < 0) | (target >= N_LEVELS))
-        new_level = np.where(invalid | ~acting, old_level, target)
-        heading = np.where(acting, np.mod(self.ac_heading_deg + trip[..., 0] * self.heading_step_deg,
-                                          360.0), self.ac_heading_deg)
-        speed = np.where(acting, np.clip(self.ac_speed_kt + trip[..., 1] * self.speed_step_kt,
-                                         self.min_speed_kt, self.max_speed_kt), self.ac_speed_kt)
-        self.ac_heading_deg, self.ac_speed_kt = heading, speed
-        ac_vel = self.velocities_km_s()
-        ac_vel = np.where(acting[..., None], ac_vel, 0.0)
+        new_level = np.where(invalid, old_level, target)
+        self.ac_heading_deg = (self.ac_heading_deg + self.heading_step_deg * trip[..., 0]) % 360.0
+        self.ac_speed_kt = np.minimum(
+            np.maximum(self.ac_speed_kt + self.speed_step_kt * trip[..., 1], self.min_speed_kt),
+            self.max_speed_kt)
+        self._set_controlled_velocity()
 
-        # 2. Swept separation of every controlled aircraft against every other aircraft.
-        ac_occ = (1 << old_level) | (1 << new_level)  # levels occupied during the step (bitmask)
-        oth_pos = np.concatenate([self.bg_pos_km, self.ac_pos_km], axis=1)  # (E, N, 2)
-        oth_vel = np.concatenate([self.bg_vel_km_s, ac_vel], axis=1)
-        oth_occ = np.concatenate([1 << self.bg_level, ac_occ], axis=1)
-        oth_act = np.concatenate([self.bg_active, acting], axis=1)
-        d_min, _ = closest_approach(
-            oth_pos[:, None] - self.ac_pos_km[:, :, None], oth_vel[:, None] - ac_vel[:, :, None], dt
-        )  # (E, M, N)
-        judged = (ac_occ[:, :, None] & oth_occ[:, None, :]) != 0
-        judged &= oth_act[:, None, :] & acting[:, :, None]
-        judged[:, :, self.B:] &= ~self._eye
+        # 2. Swept separation: closest approach over [0, dt] of every controlled aircraft
+        #    against every other aircraft, complex numbers as 2-D vectors.
+        pc = self.pos_km.view(np.complex128)[..., 0]  # (E, N)
+        vc = self.vel_km_s.view(np.complex128)[..., 0]
+        rp = pc[:, None, :] - pc[:, B:, None]  # (E, M, N)
+        rv = vc[:, None, :] - vc[:, B:, None]
+        t = -(rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
+        d_min = np.abs(rp + rv * np.minimum(np.maximum(t, 0.0), dt))
+        occ = 1 << self.level
+        occ[:, B:] |= 1 << new_level  # a level change occupies both levels for the step
+        judged = ((occ[:, B:, None] & occ[:, None, :]) != 0) & self.active[:, None, :]
+        judged &= self._not_self
+        judged &= acting[:, :, None]
         d_judged = np.where(judged, d_min, np.inf)
         nmac_with = d_judged < self.nmac_km
         los_with = d_judged < self.los_km
         n_nmac = nmac_with.sum(axis=2)
         n_los_only = los_with.sum(axis=2) - n_nmac
 
-        # 3. Swept goal test.
-        d_goal_min, _ = closest_approach(self.ac_goal_km - self.ac_pos_km, -ac_vel, dt)
-        reached = acting & (d_goal_min < cfg.ownship.goal_radius_km)
+        # 3. Swept goal test (the goal is a fixed point).
+        gc = self.ac_goal_km.view(np.complex128)[..., 0] - pc[:, B:]
+        va = vc[:, B:]
+        tg = np.minimum(np.maximum((gc * va.conj()).real / (np.abs(va) ** 2 + 1e-300), 0.0), dt)
+        reached = acting & (np.abs(gc - va * tg) < cfg.ownship.goal_radius_km)
 
         # 4. Move.
-        self.ac_pos_km = self.ac_pos_km + ac_vel * dt
-        self.ac_level = new_level
-        self.bg_pos_km = self.bg_pos_km + self.bg_vel_km_s * dt
-        self.steps = self.steps + live
+        self.pos_km += self.vel_km_s * dt
+        self.level[:, B:] = new_level
+        self.steps += live
         self._advance_traffic(live)
 
-        # 5. Outcomes and rewards.
+        # 5. Outcomes (priority nmac > los > boundary > success) and named rewards.
         size = self.size_km
-        p = self.ac_pos_km
-        outside = acting & ((p[..., 0] < 0) | (p[..., 0] > size) | (p[..., 1] < 0) | (p[..., 1] > size))
-        has_nmac = n_nmac > 0
-        has_los = los_with.any(axis=2)
-        outcome = np.full(acting.shape, RUNNING, dtype=np.int8)
-        outcome[reached] = SUCCESS
+        p = self.pos_km[:, B:]
+        outside = acting & ((p < 0.0) | (p > size)).any(axis=2)
+        outcome = np.where(reached, SUCCESS, RUNNING).astype(np.int8)
         if cfg.sector.boundary_terminates:
-            outcome[outside & ~reached] = BOUNDARY
+            outcome[outside] = BOUNDARY
         if cfg.separation.los_terminates:
-            outcome[has_los] = LOS
-        outcome[has_nmac] = NMAC
+            outcome[n_los_only + n_nmac > 0] = LOS
+        outcome[n_nmac > 0] = NMAC
         outcome[~acting] = RUNNING
         terminated = outcome != RUNNING
         truncated = acting & ~terminated & (self.steps >= self.max_steps)[:, None]
         outcome[truncated] = TIMEOUT
 
         w = cfg.reward
-        d_goal = np.linalg.norm(self.ac_goal_km - p, axis=-1)
-        af = acting.astype(float)
+        d_goal = np.abs(gc - va * dt)
         rewards = {
             "goal": w.goal * (outcome == SUCCESS),
-            "path": -w.path * (d_goal / size) ** 2 * af,
+            "path": (-w.path / size**2) * d_goal**2 * acting,
             "boundary": -w.boundary * outside,
-            "step": -w.step * af,
+            "step": -w.step * acting,
             "timeout": -w.timeout * truncated,
             "los": -w.los * n_los_only,
             "nmac": -w.nmac * n_nmac,
         }
-        rewards = {k: v.astype(float) for k, v in rewards.items()}
 
         finished = terminated | truncated
-        self.ac_outcome = np.where(finished, outcome, self.ac_outcome).astype(np.int8)
-        self.ac_active = acting & ~finished
+        self.ac_outcome[finished] = outcome[finished]
+        self.active[:, B:] = acting & ~finished
+        vc[:, B:] *= self.ac_active  # aircraft that left stop moving
         return StepResult(
             acting=acting, rewards=rewards, los_with=los_with, nmac_with=nmac_with,
             invalid_action=invalid, outside=outside, reached_goal=reached,
             terminated=terminated, truncated=truncated, outcome=outcome,
-            min_sep_km=d_judged.min(axis=2) if d_judged.shape[2] else np.full(acting.shape, np.inf),
+            min_sep_km=d_judged.min(axis=2, initial=np.inf),
         )
 
     def _advance_traffic(self, live: NDArray[np.bool_]) -> None:
         """Airway aircraft leave at the end of their route; due spawns enter when clear."""
-        R, C = self.R, self.C
+        R, C, B = self.R, self.C, self.B
         if self.X:
-            p = self.bg_pos_km[:, R * C:]
-            inside = (p[..., 0] >= 0) & (p[..., 0] <= self.size_km) & (p[..., 1] >= 0) & (
-                p[..., 1] <= self.size_km)
-            self.bg_active[:, R * C:] &= inside
+            p = self.pos_km[:, R * C : B]
+            outside = ((p < 0.0) | (p > self.size_km)).any(axis=2)
+            self.active[:, R * C : B] &= ~outside
         if not R:
             return
         step_km = self.traffic_speed_km_s * self.dt_s
         self.bg_arc_km += step_km
-        arr = self.bg_active[:, : R * C]
-        arr &= self.bg_arc_km < self.route_length_km[self.slot_route]
+        arr = self.active[:, : R * C]
+        arr &= self.bg_arc_km < self._route_len_slot
 
-        self.route_last_arc_km = self.route_last_arc_km + step_km * live[:, None]
+        self.route_last_arc_km += step_km * live[:, None]
         due = (self.route_last_arc_km >= self.route_spacing_km) & live[:, None]
         if not due.any():
             return
@@ -396,11 +412,11 @@ class Simulator:
         slot = r_idx * C + free
         if arr[e_idx, slot].any():  # pragma: no cover - capacity is n + 2 by construction
             raise RuntimeError("airway slot capacity exceeded")
-        self.bg_active[e_idx, slot] = True
+        self.active[e_idx, slot] = True
         self.bg_arc_km[e_idx, slot] = arc[e_idx, r_idx]
-        self.bg_pos_km[e_idx, slot] = pos[e_idx, r_idx]
-        self.bg_vel_km_s[e_idx, slot] = self.route_unit[r_idx] * self.traffic_speed_km_s
-        self.bg_level[e_idx, slot] = level[e_idx, r_idx]
+        self.pos_km[e_idx, slot] = pos[e_idx, r_idx]
+        self.vel_km_s[e_idx, slot] = self.route_unit[r_idx] * self.traffic_speed_km_s
+        self.level[e_idx, slot] = level[e_idx, r_idx]
         self.route_last_arc_km[e_idx, r_idx] = arc[e_idx, r_idx]
         self.route_spawn_count[e_idx, r_idx] += 1
 

@@ -39,7 +39,6 @@ from numpy.typing import NDArray
 
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim.core import Simulator
-from cdr_bench.sim.geometry import bearing_deg, closest_approach
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 OWN_FEATURES = (
@@ -81,62 +80,70 @@ def observe(sim: Simulator) -> NDArray[np.float32]:
     size = sim.size_km
     K = cfg.observation.neighbours
     rng_km = cfg.observation.range_km
-    E, M = sim.E, sim.M
-    pos = sim.ac_pos_km
-    vel = sim.velocities_km_s()
-    head = sim.ac_heading_deg
-    goal_vec = sim.ac_goal_km - pos
-    goal_dist = np.sqrt((goal_vec**2).sum(-1))
-    rel_bearing = np.deg2rad(bearing_deg(goal_vec[..., 0], goal_vec[..., 1]) - head)
+    E, M, B = sim.E, sim.M, sim.B
+    out = np.zeros((E, M, 12 + 10 * K))
+
+    # Own state and goal; complex numbers as 2-D vectors (east = real, north = imag).
+    pc = sim.pos_km.view(np.complex128)[..., 0]  # (E, N)
+    vc = sim.vel_km_s.view(np.complex128)[..., 0]
+    own = pc[:, B:]
+    out[..., 0] = own.real * (2.0 / size) - 1.0
+    out[..., 1] = own.imag * (2.0 / size) - 1.0
+    h = np.deg2rad(sim.ac_heading_deg)
+    out[..., 2] = np.sin(h)
+    out[..., 3] = np.cos(h)
     mid = 0.5 * (sim.min_speed_kt + sim.max_speed_kt)
     half = max(0.5 * (sim.max_speed_kt - sim.min_speed_kt), 1e-9)
-    h = np.deg2rad(head)
-    own = np.stack(
-        [
-            2 * pos[..., 0] / size - 1, 2 * pos[..., 1] / size - 1, np.sin(h), np.cos(h),
-            (sim.ac_speed_kt - mid) / half, sim.ac_level - 1.0, goal_vec[..., 0] / size,
-            goal_vec[..., 1] / size, goal_dist / size, np.sin(rel_bearing), np.cos(rel_bearing),
-            np.broadcast_to((sim.steps / sim.max_steps)[:, None], (E, M)),
-        ],
-        axis=-1,
-    )
+    out[..., 4] = (sim.ac_speed_kt - mid) / half
+    out[..., 5] = sim.ac_level - 1.0
+    g = sim.ac_goal_km.view(np.complex128)[..., 0] - own
+    out[..., 6] = g.real / size
+    out[..., 7] = g.imag / size
+    gd = np.abs(g)
+    out[..., 8] = gd / size
+    # Goal direction relative to the heading: rotate by e^{i(h - 90°)}; for a goal to the right
+    # (clockwise of the heading) the rotated vector points to negative imag.
+    rel = g * np.exp(1j * (h - np.pi / 2)) / np.maximum(gd, 1e-9)
+    out[..., 9] = -rel.imag
+    out[..., 10] = rel.real
+    out[..., 11] = (sim.steps / sim.max_steps)[:, None]
 
-    # Every other aircraft: background, then the other controlled ones still flying.
-    o_pos = np.concatenate([sim.bg_pos_km, pos], axis=1)  # (E, N, 2)
-    o_vel = np.concatenate([sim.bg_vel_km_s, vel], axis=1)
-    o_lvl = np.concatenate([sim.bg_level, sim.ac_level], axis=1)
-    o_act = np.concatenate([sim.bg_active, sim.ac_active], axis=1)
-    N = o_pos.shape[1]
-    rel = o_pos[:, None] - pos[:, :, None]  # (E, M, N, 2)
-    dist = np.sqrt((rel**2).sum(-1))
-    valid = np.broadcast_to(o_act[:, None, :], (E, M, N)).copy()
-    valid[:, :, sim.B:] &= ~np.eye(M, dtype=bool)[None]
-    dist = np.where(valid, dist, np.inf)
-    if N > K:
-        near = np.argpartition(dist, K - 1, axis=-1)[..., :K]
-        order = np.argsort(np.take_along_axis(dist, near, -1), axis=-1)
-        near = np.take_along_axis(near, order, -1)
-    else:
-        near = np.argsort(dist, axis=-1)
+    # K nearest other aircraft (horizontal distance, any level).
+    rp = pc[:, None, :] - own[:, :, None]  # (E, M, N)
+    dist = np.where(sim.active[:, None, :] & sim._not_self, np.abs(rp), np.inf)
+    near = np.argsort(dist, axis=-1)[..., :K]  # (E, M, k)
     kk = near.shape[-1]
-    nd = np.take_along_axis(dist, near, -1)  # (E, M, k)
-    present = np.isfinite(nd)
-    nrel = np.take_along_axis(rel, near[..., None], 2)
-    nvel = o_vel[np.arange(E)[:, None, None], near] - vel[:, :, None]
-    nlvl = o_lvl[np.arange(E)[:, None, None], near] - sim.ac_level[:, :, None]
-    d_cpa, t_cpa = closest_approach(nrel, nvel, cfg.observation.lookahead_s)
-    nb = np.stack(
-        [
-            np.ones_like(nd), nrel[..., 0] / rng_km, nrel[..., 1] / rng_km,
-            nvel[..., 0] / _VEL_SCALE_KM_S, nvel[..., 1] / _VEL_SCALE_KM_S, nlvl / 2.0,
-            nd / rng_km, t_cpa / cfg.observation.lookahead_s, d_cpa / rng_km,
-            ((nlvl == 0) & (d_cpa < sim.los_km)).astype(float),
-        ],
-        axis=-1,
-    )
-    nb = np.where(present[..., None], nb, 0.0)
-    if kk < K:
-        nb = np.concatenate([nb, np.zeros((E, M, K - kk, nb.shape[-1]))], axis=2)
-    obs = np.concatenate([own, nb.reshape(E, M, -1)], axis=-1).astype(np.float32)
-    low, high = observation_bounds(cfg)
-    return np.clip(obs, low, high)
+    ei = np.arange(E)[:, None, None]
+    mi = np.arange(M)[None, :, None]
+    nd = dist[ei, mi, near]
+    present = nd < np.inf
+    nrel = rp[ei, mi, near]
+    nvel = vc[ei, near] - vc[:, B:, None]
+    nlvl = (sim.level[ei, near] - sim.ac_level[:, :, None]).astype(float)
+    look = cfg.observation.lookahead_s
+    t = np.minimum(np.maximum(-(nrel * nvel.conj()).real / (np.abs(nvel) ** 2 + 1e-300), 0.0), look)
+    d_cpa = np.abs(nrel + nvel * t)
+    nb = out[..., 12 : 12 + 10 * kk].reshape(E, M, kk, 10)
+    nb[..., 0] = 1.0
+    nb[..., 1] = nrel.real / rng_km
+    nb[..., 2] = nrel.imag / rng_km
+    nb[..., 3] = nvel.real / _VEL_SCALE_KM_S
+    nb[..., 4] = nvel.imag / _VEL_SCALE_KM_S
+    nb[..., 5] = nlvl / 2.0
+    nb[..., 6] = nd / rng_km
+    nb[..., 7] = t / look
+    nb[..., 8] = d_cpa / rng_km
+    nb[..., 9] = (nlvl == 0) & (d_cpa < sim.los_km)
+    nb[~present] = 0.0
+    low, high = _bounds(cfg)
+    return np.minimum(np.maximum(out, low, out=out), high, out=out).astype(np.float32)
+
+
+_BOUNDS_CACHE: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
+
+
+def _bounds(cfg: ScenarioConfig) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    key = cfg.observation.neighbours
+    if key not in _BOUNDS_CACHE:
+        _BOUNDS_CACHE[key] = observation_bounds(cfg)
+    return _BOUNDS_CACHE[key]

@@ -1,0 +1,18 @@
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from cdr_bench.scenarios import ScenarioConfig, load_scenario
+
+
+def make_config(**overrides: Any) -> ScenarioConfig:
+    """The base scenario with nested overrides (no airway traffic unless asked)."""
+    overrides.setdefault("traffic", {"routes": 0})
+    return load_scenario("_base", **overrides)
+
+
+@pytest.fixture
+def config_factory():
+    return make_config

@@ -1,0 +1,161 @@
+"""Behaviour of the parallel env beyond the PettingZoo contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import cdr_bench
+from cdr_bench import actions
+from cdr_bench.sim import REWARD_TERMS
+
+
+def test_agents_and_spaces():
+    env = cdr_bench.parallel_env("marl/medium-4")
+    assert env.possible_agents == ["ownship_0", "intruder_0", "intruder_1", "intruder_2",
+                                   "intruder_3"]
+    obs, infos = env.reset(seed=1)
+    assert env.agents == env.possible_agents
+    for a in env.agents:
+        assert set(obs[a]) == {"observation", "action_mask"}
+        assert obs[a]["observation"].dtype == np.float32
+        assert obs[a]["observation"].shape == (42,)
+        assert obs[a]["action_mask"].dtype == np.int8 and obs[a]["action_mask"].shape == (27,)
+        assert env.observation_space(a).contains(obs[a])
+    assert env.observation_space("ownship_0") is env.observation_space("ownship_0")
+
+
+def test_masked_action_does_not_crash_and_is_reported():
+    env = cdr_bench.parallel_env("medium")
+    obs, _ = env.reset(seed=0)
+    level = int(env.sim.ac_level[0, 0])
+    bad = actions.encode((0, 0, 1)) if level == 2 else actions.encode((0, 0, -1))
+    if level == 1:  # move to a bound first
+        env.step({"ownship_0": actions.encode((0, 0, 1))})
+        bad = actions.encode((0, 0, 1))
+    assert obs is not None
+    lv = int(env.sim.ac_level[0, 0])
+    _, _, _, _, infos = env.step({"ownship_0": bad})
+    assert infos["ownship_0"]["invalid_action"] is True
+    assert int(env.sim.ac_level[0, 0]) == lv
+
+
+@pytest.mark.parametrize("value", [27, -1, 100])
+def test_out_of_range_action_raises_naming_agent_and_value(value):
+    env = cdr_bench.parallel_env("low")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=rf"ownship_0.*{value}"):
+        env.step({"ownship_0": value})
+
+
+@pytest.mark.parametrize("value", [3.5, "3", None, True])
+def test_non_integer_action_raises(value):
+    env = cdr_bench.parallel_env("low")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="ownship_0"):
+        env.step({"ownship_0": value})
+
+
+def test_numpy_integer_actions_accepted():
+    env = cdr_bench.parallel_env("low")
+    env.reset(seed=0)
+    env.step({"ownship_0": np.int64(13)})
+    env.step({"ownship_0": np.array(13)})
+    env.step({"ownship_0": np.array([13])})
+
+
+def test_infos_carry_named_terms_that_sum_to_reward_and_outcome_at_end():
+    env = cdr_bench.parallel_env("high")
+    obs, _ = env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    total = 0.0
+    while env.agents:
+        m = obs["ownship_0"]["action_mask"]
+        a = int(rng.choice(np.flatnonzero(m)))
+        obs, rew, term, trunc, infos = env.step({"ownship_0": a})
+        info = infos["ownship_0"]
+        assert set(info["reward_terms"]) == set(REWARD_TERMS)
+        assert sum(info["reward_terms"].values()) == pytest.approx(rew["ownship_0"])
+        assert info["goal_reward"] + info["safety_reward"] == pytest.approx(rew["ownship_0"])
+        assert ("outcome" in info) == (term["ownship_0"] or trunc["ownship_0"])
+        total += rew["ownship_0"]
+        for other in info["los_with"] + info["nmac_with"]:
+            assert other.startswith(("bg_", "intruder_"))
+    assert info["outcome"] in {"success", "nmac", "timeout"}
+
+
+def test_determinism_500_steps():
+    def run():
+        env = cdr_bench.parallel_env("high")
+        obs, _ = env.reset(seed=123)
+        rng = np.random.default_rng(7)
+        out = []
+        for _ in range(500):
+            if not env.agents:
+                obs, _ = env.reset()
+            a = int(rng.choice(np.flatnonzero(obs["ownship_0"]["action_mask"])))
+            obs, rew, *_ = env.step({"ownship_0": a})
+            out.append((obs["ownship_0"]["observation"].copy(), rew["ownship_0"]))
+        return out
+
+    a, b = run(), run()
+    for (oa, ra), (ob, rb) in zip(a, b):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb
+
+
+def test_different_seeds_differ_and_episode_seed_option_reproduces():
+    env = cdr_bench.parallel_env("medium")
+    o1, i1 = env.reset(seed=1)
+    o2, _ = env.reset(seed=2)
+    assert not np.array_equal(o1["ownship_0"]["observation"], o2["ownship_0"]["observation"])
+    o3, _ = env.reset(options={"episode_seed": i1["ownship_0"]["episode_seed"]})
+    np.testing.assert_array_equal(o1["ownship_0"]["observation"], o3["ownship_0"]["observation"])
+
+
+def test_reset_seed_seeds_action_spaces():
+    env = cdr_bench.parallel_env("marl/low-2")
+    env.reset(seed=9)
+    s1 = [env.action_space(a).sample() for a in env.possible_agents]
+    env.reset(seed=9)
+    s2 = [env.action_space(a).sample() for a in env.possible_agents]
+    assert s1 == s2
+
+
+def test_observation_neighbour_features_match_geometry():
+    env = cdr_bench.parallel_env("high")
+    obs, _ = env.reset(seed=11)
+    o = obs["ownship_0"]["observation"].astype(float)
+    sim = env.sim
+    others = sim.bg_pos_km[0][sim.bg_active[0]]
+    d = np.sort(np.linalg.norm(others - sim.ac_pos_km[0, 0], axis=1))[:3]
+    np.testing.assert_allclose([o[12 + 6], o[22 + 6], o[32 + 6]], np.minimum(d / 100.0, 10),
+                               rtol=1e-5)
+    assert o[12] == o[22] == o[32] == 1.0
+
+
+def test_goal_relative_bearing_sign():
+    env = cdr_bench.parallel_env(
+        "low", ownship={"start": {"position_km": [200.0, 200.0], "heading_deg": 0.0,
+                                  "speed_kt": 430.0, "level": 1}, "goal_km": [300.0, 200.0]})
+    obs, _ = env.reset(seed=0)
+    o = obs["ownship_0"]["observation"]
+    assert o[9] == pytest.approx(1.0, abs=1e-6)  # goal due east, heading north: to the right
+    assert o[10] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_rgb_array_render_and_bad_render_mode():
+    env = cdr_bench.parallel_env("medium", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    assert frame.std() > 0
+    with pytest.raises(ValueError, match="render_mode"):
+        cdr_bench.parallel_env("medium", render_mode="ascii")
+
+
+def test_overrides_are_validated():
+    env = cdr_bench.parallel_env("medium", separation={"los_km": 8.0})
+    assert env.config.separation.los_km == 8.0
+    with pytest.raises(cdr_bench.ScenarioError, match="separation.los_kn"):
+        cdr_bench.parallel_env("medium", separation={"los_kn": 8.0})
