@@ -42,8 +42,11 @@ def register(sub: Any) -> None:
     r = sub.add_parser("render", help="record an episode of a scenario as an animated GIF")
     r.add_argument("scenario", help="registry name or YAML path")
     r.add_argument("--out", required=True, help="output .gif path")
-    r.add_argument("--agent", default=None,
-                   help="agent file (default: every aircraft holds course, speed and level)")
+    r.add_argument(
+        "--agent",
+        default=None,
+        help="agent file (default: every aircraft holds course, speed and level)",
+    )
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--max-frames", type=int, default=400)
     r.add_argument("--fps", type=int, default=8)
@@ -77,8 +80,10 @@ def _scenarios_validate(args: argparse.Namespace) -> int:
     for f in args.files:
         try:
             cfg = load_scenario(f)
-            print(f"ok    {f}  ({cfg.id}, {cfg.n_route_intruders} airway intruders, "
-                  f"{len(cfg.aircraft)} placed, {cfg.n_learning_intruders} learning)")
+            print(
+                f"ok    {f}  ({cfg.id}, {cfg.n_route_intruders} airway intruders, "
+                f"{len(cfg.aircraft)} placed, {cfg.n_learning_intruders} learning)"
+            )
         except ScenarioError as e:
             bad += 1
             print(f"error {e}", file=sys.stderr)
@@ -106,11 +111,12 @@ def _render(args: argparse.Namespace) -> int:
     if args.agent is not None:
         from cdr_bench.evaluate.loader import load_agent  # the agent protocol of cdr-bench
 
-        agent = load_agent(args.agent, env.observation_space("ownship_0"),
-                           env.action_space("ownship_0"))
+        agent = load_agent(
+            args.agent, env.observation_space("ownship_0"), env.action_space("ownship_0")
+        )
         policy = agent.act
     obs, _ = env.reset(seed=args.seed)
-    frames = [env.render()]
+    frames: list[Any] = [env.render()]
     while env.agents and len(frames) < args.max_frames:
         actions = {a: (policy(obs[a]) if policy else HOLD) for a in env.agents}
         obs, _, _, _, infos = env.step(actions)
@@ -156,5 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # run the imported module so its exception classes are the ones caught
+    from cdr_bench.cli import main as _main
+
+    sys.exit(_main())

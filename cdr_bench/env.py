@@ -13,7 +13,14 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from cdr_bench.actions import N_ACTIONS
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
-from cdr_bench.sim import OUTCOME_NAMES, REWARD_TERMS, Simulator, observation_bounds, observe
+from cdr_bench.sim import (
+    OUTCOME_NAMES,
+    REWARD_TERMS,
+    Simulator,
+    StepResult,
+    observation_bounds,
+    observe,
+)
 from cdr_bench.sim.core import GOAL_TERMS, SAFETY_TERMS
 
 _STATE_AC = 8  # x, y, vx, vy, level, active, goal_x, goal_y
@@ -157,7 +164,7 @@ class CDREnv(ParallelEnv):
     * v0 (scenario version 1): initial release.
     """
 
-    metadata = {
+    metadata: dict[str, Any] = {
         "name": "cdr_bench_v0",
         "render_modes": ["human", "rgb_array"],
         "render_fps": 8,
@@ -183,7 +190,7 @@ class CDREnv(ParallelEnv):
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         low, high = observation_bounds(self.config)
-        self.observation_spaces = {
+        self.observation_spaces: dict[str, spaces.Dict] = {
             a: spaces.Dict(
                 {
                     "observation": spaces.Box(low, high, dtype=np.float32),
@@ -199,7 +206,7 @@ class CDREnv(ParallelEnv):
         self._bg_ids = [f"bg_{b}" for b in range(B)]
         self._seed_stream = np.random.default_rng()
         self._trail: list[NDArray[np.float64]] = []
-        self._last_result = None
+        self._last_result: StepResult | None = None
         self._renderer: Any = None
 
     # -- spaces (cached: the same object every call) ----------------------------------------
@@ -234,9 +241,9 @@ class CDREnv(ParallelEnv):
             self.render()
         return obs, infos
 
-    def step(self, actions: dict[str, Any]) -> tuple[
-        dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]
-    ]:
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
         act = np.full((1, self.sim.M), 13, dtype=np.int64)
@@ -285,19 +292,29 @@ class CDREnv(ParallelEnv):
     def _observations(self, agents: list[str]) -> dict[str, dict[str, NDArray[Any]]]:
         o = observe(self.sim)[0]
         masks = self.sim.action_masks()[0]
-        return {a: {"observation": o[self._index[a]], "action_mask": masks[self._index[a]]}
-                for a in agents}
+        return {
+            a: {"observation": o[self._index[a]], "action_mask": masks[self._index[a]]}
+            for a in agents
+        }
 
     def state(self) -> NDArray[np.float32]:
         """Global state, float32: per controlled aircraft (x, y, vx, vy, level, active, goal x,
         goal y) then per background slot (x, y, vx, vy, level, active); km, km/s."""
         s = self.sim
         ac = np.concatenate(
-            [s.ac_pos_km[0], s.velocities_km_s()[0], s.ac_level[0, :, None],
-             s.ac_active[0, :, None], s.ac_goal_km[0]], axis=1)
+            [
+                s.ac_pos_km[0],
+                s.velocities_km_s()[0],
+                s.ac_level[0, :, None],
+                s.ac_active[0, :, None],
+                s.ac_goal_km[0],
+            ],
+            axis=1,
+        )
         bg = np.concatenate(
             [s.bg_pos_km[0], s.bg_vel_km_s[0], s.bg_level[0, :, None], s.bg_active[0, :, None]],
-            axis=1)
+            axis=1,
+        )
         bg = np.where(s.bg_active[0, :, None], bg, 0.0)
         out = np.concatenate([ac.reshape(-1), bg.reshape(-1)]).astype(np.float32)
         return np.clip(out, self.state_space.low, self.state_space.high)
@@ -334,9 +351,7 @@ def _check_action(agent: str, value: Any) -> int:
             f"of type {type(value).__name__}"
         )
     if not 0 <= int(v) < N_ACTIONS:
-        raise ValueError(
-            f"action for agent {agent!r} must be in 0..{N_ACTIONS - 1}, got {int(v)}"
-        )
+        raise ValueError(f"action for agent {agent!r} must be in 0..{N_ACTIONS - 1}, got {int(v)}")
     return int(v)
 
 
@@ -347,8 +362,9 @@ def parallel_env(
     return CDREnv(scenario, render_mode=render_mode, **overrides)
 
 
-def env(scenario: str | ScenarioConfig = "medium", render_mode: str | None = None,
-        **overrides: Any) -> Any:
+def env(
+    scenario: str | ScenarioConfig = "medium", render_mode: str | None = None, **overrides: Any
+) -> Any:
     """The AEC form of :func:`parallel_env` (PettingZoo's ``parallel_to_aec``)."""
     return parallel_to_aec(parallel_env(scenario, render_mode=render_mode, **overrides))
 

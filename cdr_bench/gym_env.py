@@ -25,18 +25,23 @@ class OwnshipEnv(gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 8}
 
-    def __init__(self, scenario: str | ScenarioConfig = "medium", render_mode: str | None = None,
-                 intruder_policy: Callable[[dict[str, Any]], int] | None = None,
-                 **overrides: Any):
+    def __init__(
+        self,
+        scenario: str | ScenarioConfig = "medium",
+        render_mode: str | None = None,
+        intruder_policy: Callable[[dict[str, Any]], int] | None = None,
+        **overrides: Any,
+    ):
         self.par_env = CDREnv(scenario, render_mode=render_mode, **overrides)
         self.render_mode = render_mode
-        self.observation_space = self.par_env.observation_space("ownship_0")["observation"]
+        self.observation_space = self.par_env.observation_spaces["ownship_0"]["observation"]
         self.action_space = self.par_env.action_space("ownship_0")
         self._intruder_policy = intruder_policy
         self._obs: dict[str, Any] = {}
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
         self._obs, infos = self.par_env.reset(seed=seed, options=options)
         return self._obs["ownship_0"]["observation"], infos["ownship_0"]
@@ -51,8 +56,13 @@ class OwnshipEnv(gym.Env):
         self._obs = {a: obs[a] for a in self.par_env.agents}
         o = obs["ownship_0"]
         self._last_mask = o["action_mask"]
-        return (o["observation"], rew["ownship_0"], term["ownship_0"], trunc["ownship_0"],
-                info["ownship_0"])
+        return (
+            o["observation"],
+            rew["ownship_0"],
+            term["ownship_0"],
+            trunc["ownship_0"],
+            info["ownship_0"],
+        )
 
     def action_masks(self) -> NDArray[np.bool_]:
         """Feasible actions of the ownship now, (27,) bool."""

@@ -16,8 +16,12 @@ SIZE_PX = 512
 MARGIN_PX = 24
 
 
-def draw_frame(sim: Simulator, trail: list[NDArray[np.float64]] | None = None,
-               last: StepResult | None = None, episode: int = 0) -> NDArray[np.uint8]:
+def draw_frame(
+    sim: Simulator,
+    trail: list[NDArray[np.float64]] | None = None,
+    last: StepResult | None = None,
+    episode: int = 0,
+) -> NDArray[np.uint8]:
     """RGB frame (H, W, 3) uint8 of episode ``episode`` of ``sim``."""
     size = sim.size_km
     scale = (SIZE_PX - 2 * MARGIN_PX) / size
@@ -39,8 +43,11 @@ def draw_frame(sim: Simulator, trail: list[NDArray[np.float64]] | None = None,
         x, y = px(p)
         col = LEVEL_COLOURS[int(level)]
         if ring:
-            d.ellipse([x - los_r / 2, y - los_r / 2, x + los_r / 2, y + los_r / 2],
-                      outline=(220, 30, 30) if red else (170, 170, 170), width=1)
+            d.ellipse(
+                [x - los_r / 2, y - los_r / 2, x + los_r / 2, y + los_r / 2],
+                outline=(220, 30, 30) if red else (170, 170, 170),
+                width=1,
+            )
         d.ellipse([x - radius, y - radius, x + radius, y + radius], fill=col)
         n = float(np.hypot(v[0], v[1]))
         if n > 0:
@@ -48,8 +55,14 @@ def draw_frame(sim: Simulator, trail: list[NDArray[np.float64]] | None = None,
             d.line([x, y, x + v[0] / n * tick, y - v[1] / n * tick], fill=col, width=2)
 
     for b in np.flatnonzero(sim.bg_active[episode]):
-        aircraft(sim.bg_pos_km[episode, b], sim.bg_vel_km_s[episode, b],
-                 sim.bg_level[episode, b], 3.5, True, b in flagged)
+        aircraft(
+            sim.bg_pos_km[episode, b],
+            sim.bg_vel_km_s[episode, b],
+            sim.bg_level[episode, b],
+            3.5,
+            True,
+            b in flagged,
+        )
     if trail and len(trail) > 1:
         d.line([px(p) for p in trail], fill=(120, 0, 140), width=2)
     vel = sim.velocities_km_s()[episode]
@@ -60,10 +73,19 @@ def draw_frame(sim: Simulator, trail: list[NDArray[np.float64]] | None = None,
         d.line([gx - 6, gy + 6, gx + 6, gy - 6], fill=col, width=2)
         if sim.ac_active[episode, m] or m == 0:
             red = last is not None and bool(last.los_with[episode, m].any())
-            aircraft(sim.ac_pos_km[episode, m], vel[m], sim.ac_level[episode, m],
-                     6.0 if m == 0 else 5.0, True, red)
-    d.text((MARGIN_PX, 4), f"{sim.config.id}  step {int(sim.steps[episode])}  "
-           f"levels: blue 0, green 1, orange 2", fill=(20, 20, 20))
+            aircraft(
+                sim.ac_pos_km[episode, m],
+                vel[m],
+                sim.ac_level[episode, m],
+                6.0 if m == 0 else 5.0,
+                True,
+                red,
+            )
+    d.text(
+        (MARGIN_PX, 4),
+        f"{sim.config.id}  step {int(sim.steps[episode])}  levels: blue 0, green 1, orange 2",
+        fill=(20, 20, 20),
+    )
     return np.asarray(img, dtype=np.uint8)
 
 
@@ -94,5 +116,12 @@ class HumanWindow:
 def save_gif(frames: list[NDArray[np.uint8]], path: str, fps: int = 8) -> None:
     """Write frames as an animated GIF."""
     images = [Image.fromarray(f) for f in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
-                   loop=0, optimize=False, format="GIF")
+    images[0].save(
+        path,
+        save_all=True,
+        append_images=images[1:],
+        duration=int(1000 / fps),
+        loop=0,
+        optimize=False,
+        format="GIF",
+    )

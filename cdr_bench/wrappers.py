@@ -32,9 +32,10 @@ class FlatObservation(BaseParallelWrapper):
     def __init__(self, env: CDREnv, include_mask: bool = True):
         super().__init__(env)
         self.include_mask = include_mask
-        self._spaces = {}
+        self._spaces: dict[str, spaces.Box] = {}
         for a in env.possible_agents:
-            box = env.observation_space(a)["observation"]
+            box = env.observation_spaces[a]["observation"]
+            assert isinstance(box, spaces.Box)
             if include_mask:
                 low = np.concatenate([box.low, np.zeros(27, np.float32)])
                 high = np.concatenate([box.high, np.ones(27, np.float32)])
@@ -47,8 +48,10 @@ class FlatObservation(BaseParallelWrapper):
     def _flat(self, obs: dict[str, Any]) -> dict[str, np.ndarray]:
         if not self.include_mask:
             return {a: o["observation"] for a, o in obs.items()}
-        return {a: np.concatenate([o["observation"], o["action_mask"].astype(np.float32)])
-                for a, o in obs.items()}
+        return {
+            a: np.concatenate([o["observation"], o["action_mask"].astype(np.float32)])
+            for a, o in obs.items()
+        }
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
         obs, infos = self.env.reset(seed=seed, options=options)
@@ -59,8 +62,13 @@ class FlatObservation(BaseParallelWrapper):
         return self._flat(obs), rew, term, trunc, infos
 
 
-def sb3_vec_env(scenario: str = "marl/low-2", num_envs: int = 1, include_mask: bool = True,
-                seed: int | None = None, **overrides: Any) -> Any:
+def sb3_vec_env(
+    scenario: str = "marl/low-2",
+    num_envs: int = 1,
+    include_mask: bool = True,
+    seed: int | None = None,
+    **overrides: Any,
+) -> Any:
     """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` copies of a (multi-agent) scenario.
 
     Slots: ``num_envs * len(possible_agents)``; aircraft that have left receive zero observations
@@ -89,7 +97,7 @@ def sb3_vec_env(scenario: str = "marl/low-2", num_envs: int = 1, include_mask: b
                 return self.venv.reset()
             # SuperSuit's SB3 wrapper forwards a reset seed to a seed() that does not exist below
             # it; reset the concatenated vector env underneath it directly instead.
-            inner = self.venv
+            inner: Any = self.venv
             obs, inner.reset_infos = inner.venv.reset(seed=s)
             return obs
 

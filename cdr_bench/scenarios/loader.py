@@ -86,7 +86,9 @@ def _load_mapping(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
     if parent is None:
         return data
     if not isinstance(parent, str):
-        raise ScenarioError(str(path), "extends", f"expected a scenario name or path, got {parent!r}")
+        raise ScenarioError(
+            str(path), "extends", f"expected a scenario name or path, got {parent!r}"
+        )
     try:
         parent_path = _resolve(parent, relative_to=path.parent)
     except ScenarioError as e:

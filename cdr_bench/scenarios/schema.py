@@ -89,15 +89,18 @@ class OwnshipConfig:
     speed_kt: float = _spec("initial speed in knots", 100.0, 1000.0, default=430.0)
     min_speed_kt: float = _spec("lowest commanded speed in knots", 50.0, 1000.0, default=330.0)
     max_speed_kt: float = _spec("highest commanded speed in knots", 50.0, 1000.0, default=530.0)
-    heading_step_deg: float = _spec("heading change of one action unit, deg", 0.0, 90.0, default=5.0)
+    heading_step_deg: float = _spec(
+        "heading change of one action unit, deg", 0.0, 90.0, default=5.0
+    )
     speed_step_kt: float = _spec("speed change of one action unit, kt", 0.0, 200.0, default=50.0)
     goal_radius_km: float = _spec("goal reached within this distance, km", 0.1, 100.0, default=5.0)
-    goal_margin_km: float = _spec("random goals keep this distance to every edge, km", 0.0, 1000.0,
-                                  default=20.0)
-    start_clearance_km: float = _spec("random starts keep this distance to every intruder, km",
-                                      0.0, 200.0, default=20.0)
-    start: Aircraft | None = _spec("explicit start (random boundary start when null)",
-                                   default=None)
+    goal_margin_km: float = _spec(
+        "random goals keep this distance to every edge, km", 0.0, 1000.0, default=20.0
+    )
+    start_clearance_km: float = _spec(
+        "random starts keep this distance to every intruder, km", 0.0, 200.0, default=20.0
+    )
+    start: Aircraft | None = _spec("explicit start (random boundary start when null)", default=None)
     goal_km: Point | None = _spec("explicit goal [x, y] in km (random when null)", default=None)
 
 
@@ -105,11 +108,15 @@ class OwnshipConfig:
 class TrafficConfig:
     routes: int = _spec("number of airways used (the first N of 'airways')", 0, 64, default=12)
     per_route: int = _spec("steady-state aircraft per airway", 1, 16, default=3)
-    speed_kt: float = _spec("intruder speed in knots (431.965 kt = 800 km/h)", 50.0, 1000.0,
-                            default=431.965)
+    speed_kt: float = _spec(
+        "intruder speed in knots (431.965 kt = 800 km/h)", 50.0, 1000.0, default=431.965
+    )
     spawn_clearance_km: float = _spec(
         "a spawn waits while a controlled aircraft at its level is closer than this, km",
-        0.0, 200.0, default=20.0)
+        0.0,
+        200.0,
+        default=20.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -123,8 +130,9 @@ class LearningIntruder:
 class ObservationConfig:
     neighbours: int = _spec("number of nearest aircraft observed (K)", 1, 16, default=3)
     range_km: float = _spec("distance scale of relative positions, km", 1.0, 1000.0, default=100.0)
-    lookahead_s: float = _spec("time scale of closest-approach features, s", 1.0, 3600.0,
-                               default=600.0)
+    lookahead_s: float = _spec(
+        "time scale of closest-approach features, s", 1.0, 3600.0, default=600.0
+    )
 
 
 @dataclass(frozen=True)
@@ -147,17 +155,17 @@ class ScenarioConfig:
     version: int = _spec("bumped whenever a change alters results", 1, 10_000, default=1)
     sector: SectorConfig = _spec("sector geometry", default_factory=SectorConfig)
     time: TimeConfig = _spec("time step and horizon", default_factory=TimeConfig)
-    separation: SeparationConfig = _spec("separation thresholds",
-                                         default_factory=SeparationConfig)
-    ownship: OwnshipConfig = _spec("ownship performance, start and goal",
-                                   default_factory=OwnshipConfig)
+    separation: SeparationConfig = _spec("separation thresholds", default_factory=SeparationConfig)
+    ownship: OwnshipConfig = _spec(
+        "ownship performance, start and goal", default_factory=OwnshipConfig
+    )
     traffic: TrafficConfig = _spec("airway traffic", default_factory=TrafficConfig)
     airways: tuple[Airway, ...] = _spec("the airway network", default=())
     aircraft: tuple[Aircraft, ...] = _spec("explicitly placed background aircraft", default=())
     learning_intruders: tuple[LearningIntruder, ...] = _spec(
-        "learning aircraft (agents intruder_0, intruder_1, ...)", default=())
-    observation: ObservationConfig = _spec("observation layout",
-                                           default_factory=ObservationConfig)
+        "learning aircraft (agents intruder_0, intruder_1, ...)", default=()
+    )
+    observation: ObservationConfig = _spec("observation layout", default_factory=ObservationConfig)
     reward: RewardConfig = _spec("reward weights", default_factory=RewardConfig)
 
     def to_dict(self) -> dict[str, Any]:
@@ -223,7 +231,8 @@ def _convert(value: Any, tp: Any, source: str, path: str, meta: dict[str, Any]) 
         if len(value) != len(args):
             raise ScenarioError(source, path, f"expected {_type_name(tp)}, got {value!r}")
         return tuple(
-            _convert(v, a, source, f"{path}[{i}]", meta) for i, (v, a) in enumerate(zip(value, args))
+            _convert(v, a, source, f"{path}[{i}]", meta)
+            for i, (v, a) in enumerate(zip(value, args, strict=True))
         )
     if tp is bool:
         if not isinstance(value, bool):
@@ -287,20 +296,26 @@ def _cross_check(cfg: ScenarioConfig, source: str) -> None:
     if o.min_speed_kt > o.max_speed_kt:
         raise ScenarioError(source, "ownship.min_speed_kt", "expected min_speed_kt <= max_speed_kt")
     if not o.min_speed_kt <= o.speed_kt <= o.max_speed_kt:
-        raise ScenarioError(source, "ownship.speed_kt",
-                            f"expected a value in [{o.min_speed_kt}, {o.max_speed_kt}]")
+        raise ScenarioError(
+            source, "ownship.speed_kt", f"expected a value in [{o.min_speed_kt}, {o.max_speed_kt}]"
+        )
     if 2 * o.goal_margin_km >= cfg.sector.size_km:
-        raise ScenarioError(source, "ownship.goal_margin_km",
-                            "expected less than half of sector.size_km")
+        raise ScenarioError(
+            source, "ownship.goal_margin_km", "expected less than half of sector.size_km"
+        )
     if cfg.separation.nmac_km > cfg.separation.los_km:
         raise ScenarioError(source, "separation.nmac_km", "expected nmac_km <= los_km")
     if cfg.traffic.routes > len(cfg.airways):
-        raise ScenarioError(source, "traffic.routes",
-                            f"expected at most {len(cfg.airways)} (the number of airways)")
+        raise ScenarioError(
+            source, "traffic.routes", f"expected at most {len(cfg.airways)} (the number of airways)"
+        )
     for i, li in enumerate(cfg.learning_intruders):
         if li.airway >= len(cfg.airways):
-            raise ScenarioError(source, f"learning_intruders[{i}].airway",
-                                f"expected an index below {len(cfg.airways)}")
+            raise ScenarioError(
+                source,
+                f"learning_intruders[{i}].airway",
+                f"expected an index below {len(cfg.airways)}",
+            )
     for i, a in enumerate(cfg.airways):
         if math.dist(a.start_km, a.end_km) < 1.0:
             raise ScenarioError(source, f"airways[{i}]", "expected distinct start and end")

@@ -28,15 +28,20 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import TRIPLES
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.geometry import bearing_deg, closest_approach, heading_to_unit
+from cdr_bench.sim.geometry import bearing_deg, heading_to_unit
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 N_LEVELS = 3
 
 # Outcome codes of a controlled aircraft (0 while it flies).
 RUNNING, SUCCESS, NMAC, LOS, BOUNDARY, TIMEOUT = 0, 1, 2, 3, 4, 5
-OUTCOME_NAMES = {SUCCESS: "success", NMAC: "nmac", LOS: "los", BOUNDARY: "boundary",
-                 TIMEOUT: "timeout"}
+OUTCOME_NAMES = {
+    SUCCESS: "success",
+    NMAC: "nmac",
+    LOS: "los",
+    BOUNDARY: "boundary",
+    TIMEOUT: "timeout",
+}
 
 REWARD_TERMS = ("goal", "path", "boundary", "step", "timeout", "los", "nmac")
 """Named reward terms. The goal part R_G sums the first five, the safety part R_S the last two."""
@@ -148,14 +153,15 @@ class Simulator:
     # ------------------------------------------------------------------------------------------
     # Reset
 
-    def reset(self, seeds: list[int] | NDArray[np.integer], episodes: NDArray[np.integer] | None
-              = None) -> None:
+    def reset(
+        self, seeds: list[int] | NDArray[np.integer], episodes: NDArray[np.integer] | None = None
+    ) -> None:
         """Start episodes ``episodes`` (default: all) from ``seeds`` (one per episode)."""
         idx = np.arange(self.E) if episodes is None else np.asarray(episodes)
         seeds = list(np.asarray(seeds).reshape(-1))
         if len(seeds) != len(idx):
             raise ValueError(f"expected {len(idx)} seeds, got {len(seeds)}")
-        for e, seed in zip(idx, seeds):
+        for e, seed in zip(idx, seeds, strict=True):
             self._reset_one(int(e), np.random.default_rng(int(seed)))
 
     def _reset_one(self, e: int, rng: np.random.Generator) -> None:
@@ -173,7 +179,8 @@ class Simulator:
         self.steps[e] = 0
         ang = np.deg2rad(90.0 - self.ac_heading_deg[e])
         self.vel_km_s.view(np.complex128)[e, self.B :, 0] = np.exp(1j * ang) * (
-            self.ac_speed_kt[e] * KM_PER_S_PER_KT)
+            self.ac_speed_kt[e] * KM_PER_S_PER_KT
+        )
 
     def _populate_traffic(self, e: int, rng: np.random.Generator) -> None:
         """Steady state: each route holds ``per_route`` aircraft one spacing apart, random phase."""
@@ -190,7 +197,9 @@ class Simulator:
             r_f = np.repeat(np.arange(R), n)
             self.bg_arc_km[e] = 0.0
             self.bg_arc_km[e, slot] = arcs_f
-            self.bg_pos_km[e, slot] = self.route_start_km[r_f] + arcs_f[:, None] * self.route_unit[r_f]
+            self.bg_pos_km[e, slot] = (
+                self.route_start_km[r_f] + arcs_f[:, None] * self.route_unit[r_f]
+            )
             self.bg_vel_km_s[e, slot] = self.route_unit[r_f] * self.traffic_speed_km_s
             self.bg_level[e, slot] = levels.reshape(-1)
             self.bg_active[e, slot] = arcs_f < self.route_length_km[r_f]
@@ -206,8 +215,13 @@ class Simulator:
             self.bg_level[e, b] = a.level
             self.bg_active[e, b] = True
 
-    def _clear_of_traffic(self, e: int, points_km: NDArray[np.float64], clearance_km: float,
-                          level: NDArray[np.integer] | None = None) -> NDArray[np.bool_]:
+    def _clear_of_traffic(
+        self,
+        e: int,
+        points_km: NDArray[np.float64],
+        clearance_km: float,
+        level: NDArray[np.integer] | None = None,
+    ) -> NDArray[np.bool_]:
         """Which candidate points are at least ``clearance_km`` from every background aircraft
         (any level, or only those at ``level`` when given)."""
         act = self.bg_active[e]
@@ -256,8 +270,11 @@ class Simulator:
         side, u = np.divmod(perim, size)
         cand = np.select(
             [side[:, None] == 0, side[:, None] == 1, side[:, None] == 2],
-            [np.stack([u, np.zeros_like(u)], 1), np.stack([np.full_like(u, size), u], 1),
-             np.stack([size - u, np.full_like(u, size)], 1)],
+            [
+                np.stack([u, np.zeros_like(u)], 1),
+                np.stack([np.full_like(u, size), u], 1),
+                np.stack([size - u, np.full_like(u, size)], 1),
+            ],
             np.stack([np.zeros_like(u), size - u], 1),
         )
         ok = self._clear_of_traffic(e, cand, clearance)
@@ -306,7 +323,8 @@ class Simulator:
         self.ac_heading_deg = (self.ac_heading_deg + self.heading_step_deg * trip[..., 0]) % 360.0
         self.ac_speed_kt = np.minimum(
             np.maximum(self.ac_speed_kt + self.speed_step_kt * trip[..., 1], self.min_speed_kt),
-            self.max_speed_kt)
+            self.max_speed_kt,
+        )
         self._set_controlled_velocity()
 
         # 2. Swept separation: closest approach over [0, dt] of every controlled aircraft
@@ -372,9 +390,16 @@ class Simulator:
         self.active[:, B:] = acting & ~finished
         vc[:, B:] *= self.ac_active  # aircraft that left stop moving
         return StepResult(
-            acting=acting, rewards=rewards, los_with=los_with, nmac_with=nmac_with,
-            invalid_action=invalid, outside=outside, reached_goal=reached,
-            terminated=terminated, truncated=truncated, outcome=outcome,
+            acting=acting,
+            rewards=rewards,
+            los_with=los_with,
+            nmac_with=nmac_with,
+            invalid_action=invalid,
+            outside=outside,
+            reached_goal=reached,
+            terminated=terminated,
+            truncated=truncated,
+            outcome=outcome,
             min_sep_km=d_judged.min(axis=2, initial=np.inf),
         )
 
@@ -400,8 +425,11 @@ class Simulator:
         level = self.route_spawn_count % N_LEVELS
         pos = self.route_start_km + arc[..., None] * self.route_unit  # (E, R, 2)
         d = np.linalg.norm(pos[:, :, None] - self.ac_pos_km[:, None], axis=-1)  # (E, R, M)
-        near = (d < self.config.traffic.spawn_clearance_km) & self.ac_active[:, None, :] & (
-            self.ac_level[:, None, :] == level[..., None])
+        near = (
+            (d < self.config.traffic.spawn_clearance_km)
+            & self.ac_active[:, None, :]
+            & (self.ac_level[:, None, :] == level[..., None])
+        )
         blocked = near.any(axis=2)
         spawn = due & ~blocked
         self.route_waiting = due & blocked

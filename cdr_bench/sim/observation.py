@@ -42,11 +42,31 @@ from cdr_bench.sim.core import Simulator
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 OWN_FEATURES = (
-    "x", "y", "sin_heading", "cos_heading", "speed", "level", "goal_dx", "goal_dy", "goal_dist",
-    "goal_sin_rel", "goal_cos_rel", "time",
+    "x",
+    "y",
+    "sin_heading",
+    "cos_heading",
+    "speed",
+    "level",
+    "goal_dx",
+    "goal_dy",
+    "goal_dist",
+    "goal_sin_rel",
+    "goal_cos_rel",
+    "time",
 )
-NEIGHBOUR_FEATURES = ("present", "dx", "dy", "dvx", "dvy", "dlevel", "dist", "t_cpa", "d_cpa",
-                      "conflict")
+NEIGHBOUR_FEATURES = (
+    "present",
+    "dx",
+    "dy",
+    "dvx",
+    "dvy",
+    "dlevel",
+    "dist",
+    "t_cpa",
+    "d_cpa",
+    "conflict",
+)
 _VEL_SCALE_KM_S = 1000.0 * KM_PER_S_PER_KT
 
 

@@ -29,8 +29,9 @@ def test_gymnasium_make_and_check_env():
 def test_maskable_ppo_short_run():
     sb3_contrib = pytest.importorskip("sb3_contrib")
     env = gym.make("cdr_bench/Ownship-v0", scenario="low")
-    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
-                                    seed=0, verbose=0)
+    model = sb3_contrib.MaskablePPO(
+        "MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, verbose=0
+    )
     model.learn(128)
     obs, _ = env.reset(seed=1)
     action, _ = model.predict(obs, action_masks=env.unwrapped.action_masks())

@@ -12,8 +12,13 @@ from cdr_bench.sim import REWARD_TERMS
 
 def test_agents_and_spaces():
     env = cdr_bench.parallel_env("marl/medium-4")
-    assert env.possible_agents == ["ownship_0", "intruder_0", "intruder_1", "intruder_2",
-                                   "intruder_3"]
+    assert env.possible_agents == [
+        "ownship_0",
+        "intruder_0",
+        "intruder_1",
+        "intruder_2",
+        "intruder_3",
+    ]
     obs, infos = env.reset(seed=1)
     assert env.agents == env.possible_agents
     for a in env.agents:
@@ -99,7 +104,7 @@ def test_determinism_500_steps():
         return out
 
     a, b = run(), run()
-    for (oa, ra), (ob, rb) in zip(a, b):
+    for (oa, ra), (ob, rb) in zip(a, b, strict=True):
         np.testing.assert_array_equal(oa, ob)
         assert ra == rb
 
@@ -129,15 +134,25 @@ def test_observation_neighbour_features_match_geometry():
     sim = env.sim
     others = sim.bg_pos_km[0][sim.bg_active[0]]
     d = np.sort(np.linalg.norm(others - sim.ac_pos_km[0, 0], axis=1))[:3]
-    np.testing.assert_allclose([o[12 + 6], o[22 + 6], o[32 + 6]], np.minimum(d / 100.0, 10),
-                               rtol=1e-5)
+    np.testing.assert_allclose(
+        [o[12 + 6], o[22 + 6], o[32 + 6]], np.minimum(d / 100.0, 10), rtol=1e-5
+    )
     assert o[12] == o[22] == o[32] == 1.0
 
 
 def test_goal_relative_bearing_sign():
     env = cdr_bench.parallel_env(
-        "low", ownship={"start": {"position_km": [200.0, 200.0], "heading_deg": 0.0,
-                                  "speed_kt": 430.0, "level": 1}, "goal_km": [300.0, 200.0]})
+        "low",
+        ownship={
+            "start": {
+                "position_km": [200.0, 200.0],
+                "heading_deg": 0.0,
+                "speed_kt": 430.0,
+                "level": 1,
+            },
+            "goal_km": [300.0, 200.0],
+        },
+    )
     obs, _ = env.reset(seed=0)
     o = obs["ownship_0"]["observation"]
     assert o[9] == pytest.approx(1.0, abs=1e-6)  # goal due east, heading north: to the right

@@ -13,10 +13,19 @@ from cdr_bench.sim.units import KM_PER_S_PER_KT
 from tests.conftest import make_config
 
 
-def lone_ownship(heading=90.0, speed=430.0, level=1, pos=(100.0, 200.0), goal=(390.0, 390.0),
-                 ownship=None, **kw):
-    own = {"start": {"position_km": list(pos), "heading_deg": heading, "speed_kt": speed,
-                     "level": level}, "goal_km": list(goal), **(ownship or {})}
+def lone_ownship(
+    heading=90.0, speed=430.0, level=1, pos=(100.0, 200.0), goal=(390.0, 390.0), ownship=None, **kw
+):
+    own = {
+        "start": {
+            "position_km": list(pos),
+            "heading_deg": heading,
+            "speed_kt": speed,
+            "level": level,
+        },
+        "goal_km": list(goal),
+        **(ownship or {}),
+    }
     cfg = make_config(ownship=own, **kw)
     sim = Simulator(cfg)
     sim.reset([0])
@@ -62,7 +71,8 @@ def test_heading_north_moves_north_and_turn_is_clockwise():
     step_km = 30.0 * 430.0 * KM_PER_S_PER_KT
     np.testing.assert_allclose(
         sim.ac_pos_km[0, 0],
-        [200.0 + step_km * math.sin(math.radians(5)), 100.0 + step_km * math.cos(math.radians(5))])
+        [200.0 + step_km * math.sin(math.radians(5)), 100.0 + step_km * math.cos(math.radians(5))],
+    )
     left = actions.encode((-1, 0, 0))
     for _ in range(3):
         sim.step(np.array([[left]]))
@@ -95,8 +105,9 @@ def test_goal_reached_by_swept_test_between_step_ends():
     # Goal 3.3 km after the first end-of-step point: passed mid-step, never sampled within 5 km
     # at a step end if the goal radius were tested only at the ends with a 2 km radius.
     step_km = 30.0 * 430.0 * KM_PER_S_PER_KT
-    sim = lone_ownship(pos=(100.0, 200.0), goal=(100.0 + 1.5 * step_km, 200.0),
-                       ownship={"goal_radius_km": 2.0})
+    sim = lone_ownship(
+        pos=(100.0, 200.0), goal=(100.0 + 1.5 * step_km, 200.0), ownship={"goal_radius_km": 2.0}
+    )
     r = sim.step(np.array([[actions.HOLD]]))
     assert not r.reached_goal[0, 0]  # 1.5 steps away: the first segment ends 3.3 km short
     r = sim.step(np.array([[actions.HOLD]]))
@@ -120,5 +131,5 @@ def test_path_penalty_closed_form():
     r = sim.step(np.array([[actions.HOLD]]))
     p = sim.ac_pos_km[0, 0]
     d = math.dist(p, (300.0, 0.0))
-    assert r.rewards["path"][0, 0] == pytest.approx(-(d / 400.0) ** 2)
+    assert r.rewards["path"][0, 0] == pytest.approx(-((d / 400.0) ** 2))
     assert r.rewards["step"][0, 0] == -0.01

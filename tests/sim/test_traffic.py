@@ -60,8 +60,12 @@ def test_spawn_waits_for_controlled_aircraft_at_its_level():
     sim.ac_level[0, 0] = nxt
     sim.ac_speed_kt[0, 0] = 330.0
     before = sim.intruder_count()[0]
-    steps_to_due = int(np.ceil((sim.route_spacing_km[0] - sim.route_last_arc_km[0, 0])
-                               / (sim.traffic_speed_km_s * sim.dt_s)))
+    steps_to_due = int(
+        np.ceil(
+            (sim.route_spacing_km[0] - sim.route_last_arc_km[0, 0])
+            / (sim.traffic_speed_km_s * sim.dt_s)
+        )
+    )
     for _ in range(steps_to_due):
         sim.pos_km[0, sim.B] = sim.route_start_km[0]  # keep it there
         sim.step(np.array([[HOLD]]))

@@ -1,0 +1,47 @@
+"""Real subprocess runs of the scenario and render commands."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from PIL import Image
+
+
+def cli(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "cdr_bench", *args], capture_output=True, text=True, cwd=cwd
+    )
+
+
+def test_scenarios_list_show_validate(tmp_path):
+    r = cli("scenarios", "list")
+    assert r.returncode == 0 and "curriculum/stage-12" in r.stdout and "high" in r.stdout
+    r = cli("scenarios", "show", "high")
+    assert r.returncode == 0 and "per_route: 4" in r.stdout
+    good = tmp_path / "good.yaml"
+    good.write_text("extends: low\nseparation: {los_km: 9.0}\n")
+    r = cli("scenarios", "validate", str(good))
+    assert r.returncode == 0 and r.stdout.startswith("ok")
+
+
+def test_validate_bad_file_exit_2_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("extends: low\ntraffic: {per_route: 0}\n")
+    r = cli("scenarios", "validate", str(bad))
+    assert r.returncode == 2
+    assert "traffic.per_route" in r.stderr and str(bad) in r.stderr
+    assert "Traceback" not in r.stderr
+    r = cli("scenarios", "show", "no-such-scenario")
+    assert r.returncode == 2 and "unknown scenario name" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_render_gif(tmp_path):
+    out = tmp_path / "ep.gif"
+    r = cli("render", "curriculum/stage-02", "--out", str(out), "--max-frames", "30")
+    assert r.returncode == 0, r.stderr
+    im = Image.open(out)
+    assert im.n_frames >= 2 and im.size == (512, 512)
+    assert not list(tmp_path.glob(".*tmp"))
+    r = cli("render", "low", "--out", str(tmp_path / "x.png"))
+    assert r.returncode == 2 and ".gif" in r.stderr
