@@ -323,6 +323,23 @@ def _cross_check(cfg: ScenarioConfig, source: str) -> None:
         raise ScenarioError(source, "ownship.goal_km", "expected a goal when 'start' is given")
 
 
+def _inner_dataclass(tp: Any) -> tuple[Any, str]:
+    """The dataclass inside ``X``, ``X | None`` or ``tuple[X, ...]`` and the path suffix."""
+    origin = typing.get_origin(tp)
+    if origin in (Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            inner, suffix = _inner_dataclass(arg)
+            if inner is not None:
+                return inner, suffix
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis and dataclasses.is_dataclass(args[0]):
+            return args[0], "[]"
+    if dataclasses.is_dataclass(tp):
+        return tp, ""
+    return None, ""
+
+
 def field_docs(cls: Any = ScenarioConfig, prefix: str = "") -> list[tuple[str, str, str]]:
     """(dotted path, type, doc) for every field: the scenario format reference."""
     rows = []
@@ -335,6 +352,7 @@ def field_docs(cls: Any = ScenarioConfig, prefix: str = "") -> list[tuple[str, s
         if lo is not None:
             doc += f" [{lo}, {hi}]"
         rows.append((path, _type_name(tp), doc))
-        if dataclasses.is_dataclass(tp) and tp not in (Aircraft,):
-            rows.extend(field_docs(tp, path))
+        inner, suffix = _inner_dataclass(tp)
+        if inner is not None:
+            rows.extend(field_docs(inner, path + suffix))
     return rows

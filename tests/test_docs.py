@@ -1,0 +1,32 @@
+"""The README's generated sections match the code they are generated from."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cdr_bench.docs import render
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_readme_env_card_and_scenario_format_are_current():
+    text = (ROOT / "README.md").read_text()
+    assert render(text) == text, "run: python -m cdr_bench.docs"
+
+
+def test_readme_names_install_and_test_commands():
+    text = (ROOT / "README.md").read_text()
+    assert "pip install torch==2.13.0" in text and "pytest -q" in text
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert 'pip install -q -e ".[dev]"' in ci and "pytest -q" in ci
+
+
+def test_env_card_documents_every_observation_index():
+    from cdr_bench.env import CDREnv
+    from cdr_bench.sim.observation import NEIGHBOUR_FEATURES, OWN_FEATURES
+
+    doc = CDREnv.__doc__ or ""
+    for i, name in enumerate(OWN_FEATURES):
+        assert f"| {i} | {name} |" in doc
+    for j, name in enumerate(NEIGHBOUR_FEATURES):
+        assert f"| 12 + 10k + {j} | {name} |" in doc
