@@ -58,9 +58,16 @@ def action_mask(level: NDArray[np.integer] | int, n_levels: int = 3) -> NDArray[
     Only the level bounds are masked: no climb at the top level, no descent at level 0. The mask
     never depends on separation.
     """
-    lv = np.asarray(level)[..., None]
-    infeasible = (CLIMB & (lv >= n_levels - 1)) | (DESCEND & (lv <= 0))
+    lv = np.asarray(level)
+    if n_levels == 3:  # the common case: a table lookup
+        return _MASK_3_LEVELS[lv]
+    infeasible = (CLIMB & (lv[..., None] >= n_levels - 1)) | (DESCEND & (lv[..., None] <= 0))
     return (~infeasible).astype(np.int8)
+
+
+_MASK_3_LEVELS = np.stack(
+    [(~((CLIMB & (lv >= 2)) | (DESCEND & (lv <= 0)))).astype(np.int8) for lv in range(3)]
+)
 
 
 def describe(index: int) -> str:

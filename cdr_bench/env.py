@@ -182,6 +182,14 @@ class CDREnv(ParallelEnv):
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
                 f"got {render_mode!r}"
             )
+        if render_mode == "human":
+            try:
+                import matplotlib  # noqa: F401
+            except ImportError:
+                raise ImportError(
+                    "render_mode='human' draws in a matplotlib window: pip install matplotlib "
+                    "(or use render_mode='rgb_array')"
+                ) from None
         self.config = load_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.sim = Simulator(self.config, n_episodes=1)

@@ -51,10 +51,6 @@ def test_state(scenario):
     state_test(cdr_bench.env(scenario), cdr_bench.parallel_env(scenario), num_cycles=20)
 
 
-@pytest.mark.parametrize(
-    "scenario",
-    ["medium", "marl/low-2", "curriculum/stage-01"]
-    + [s for s in SCENARIOS if s.startswith("tactical/")],
-)
+@pytest.mark.parametrize("scenario", SCENARIOS)
 def test_render(scenario):
     render_test(lambda render_mode=None: cdr_bench.env(scenario, render_mode=render_mode))
