@@ -8,9 +8,10 @@ from __future__ import annotations
 import inspect
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
-MARKERS = {
+MARKERS: dict[str, Callable[[], str]] = {
     "env-card": lambda: env_card(),
     "scenario-fields": lambda: scenario_fields(),
 }
@@ -38,7 +39,8 @@ def render(text: str) -> str:
         pattern = re.compile(
             rf"(<!-- {name}:start -->\n)(.*?)(<!-- {name}:end -->)", flags=re.DOTALL
         )
-        text = pattern.sub(lambda m, fn=fn: m.group(1) + fn() + "\n" + m.group(3), text)
+        body = fn().replace("\\", "\\\\")
+        text = pattern.sub(rf"\g<1>{body}\n\g<3>", text)
     return text
 
 
