@@ -277,8 +277,10 @@ class CDREnv(ParallelEnv):
                 "reward_terms": rt,
                 "goal_reward": g,
                 "safety_reward": s,
-                "los_with": self._partners(res.los_with[0, m] & ~res.nmac_with[0, m]),
-                "nmac_with": self._partners(res.nmac_with[0, m]),
+                "los_with": self._partners(res.los_with[0, m] & ~res.nmac_with[0, m])
+                if rt["los"]
+                else [],
+                "nmac_with": self._partners(res.nmac_with[0, m]) if rt["nmac"] else [],
                 "invalid_action": bool(res.invalid_action[0, m]),
                 "outside": bool(res.outside[0, m]),
                 "min_separation_km": float(res.min_sep_km[0, m]),

@@ -424,7 +424,8 @@ class Simulator:
         arc = np.where(self.route_waiting, 0.0, self.route_last_arc_km - self.route_spacing_km)
         level = self.route_spawn_count % N_LEVELS
         pos = self.route_start_km + arc[..., None] * self.route_unit  # (E, R, 2)
-        d = np.linalg.norm(pos[:, :, None] - self.ac_pos_km[:, None], axis=-1)  # (E, R, M)
+        pc = pos.view(np.complex128)[..., 0]  # (E, R)
+        d = np.abs(pc[:, :, None] - self.pos_km.view(np.complex128)[:, None, self.B :, 0])
         near = (
             (d < self.config.traffic.spawn_clearance_km)
             & self.ac_active[:, None, :]
