@@ -1,0 +1,64 @@
+"""Template of a cdr-bench agent: copy this folder, fill in the two methods, then run
+
+    cdr-bench evaluate path/to/my_agent/agent.py --episodes 100 --scenario medium
+
+The protocol (see ``cdr_bench/evaluate/protocol.py``):
+
+* a class named ``Agent``, constructed as ``Agent(observation_space, action_space)`` with the
+  environment's per-agent spaces: ``observation_space["observation"]`` is a ``Box(F,)`` float32
+  (F = 42 for the shipped scenarios; the index table is in the env card, README "Observation
+  Space"), ``observation_space["action_mask"]`` a ``Box(27,)`` int8, ``action_space`` is
+  ``Discrete(27)``;
+* ``act(observation) -> int``: ``observation`` is the dict ``{"observation": (F,) float32,
+  "action_mask": (27,) int8}``; return an action index 0..26 where index
+  ``9 * (a_psi + 1) + 3 * (a_v + 1) + (a_h + 1)`` encodes heading -/0/+5 deg (+ = right),
+  speed -/0/+50 kt and level -/0/+1 (``cdr_bench.actions.encode`` does it for you);
+* optional ``act_batch(observations (N, F), masks (N, 27)) -> N ints``: decide for many aircraft
+  at once (the evaluator runs episodes in lock-step batches: much faster than ``act``);
+* optional ``reset(seed)``: called before every batch of episodes; re-seed any randomness here.
+
+The same agent drives the ownship and every learning intruder. A masked action (``mask == 0``)
+is counted as invalid and its level change is not executed; anything that is not an integer in
+0..26 stops the evaluation with an error.
+
+A learned agent loads its checkpoint relative to this file, e.g.::
+
+    import torch
+    CHECKPOINT = Path(__file__).parent / "policy.pt"
+    self.policy = torch.jit.load(CHECKPOINT, map_location="cpu").eval()
+
+and every file in this folder is hashed into the result, so a result names its checkpoint.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).parent
+HOLD = 13  # (0, 0, 0): keep heading, speed and level
+
+
+class Agent:
+    def __init__(self, observation_space: Any, action_space: Any):
+        self.n_actions = int(action_space.n)  # 27
+        self.obs_size = int(observation_space["observation"].shape[0])
+        # Load a checkpoint here, e.g. from HERE / "policy.pt".
+
+    def reset(self, seed: int) -> None:
+        """Re-seed any randomness (called before every lock-step batch of episodes)."""
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, observation: dict[str, np.ndarray]) -> int:
+        """One action for one aircraft. Replace with your policy."""
+        obs = observation["observation"]  # (F,) float32
+        mask = observation["action_mask"]  # (27,) int8, 1 = feasible
+        del obs
+        return HOLD if mask[HOLD] else int(np.flatnonzero(mask)[0])
+
+    def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """(N,) actions for (N, F) observations and (N, 27) masks. Optional; delete it to have
+        ``act`` called row by row."""
+        return np.full(observations.shape[0], HOLD, dtype=np.int64)

@@ -1,0 +1,277 @@
+"""``evaluate(...)``: score one agent on scenarios; what ``cdr-bench evaluate`` calls."""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cdr_bench.cli import CLIError
+from cdr_bench.evaluate import results as rf
+from cdr_bench.evaluate.loader import AgentError, agent_identity
+from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
+from cdr_bench.evaluate.runner import (
+    DEFAULT_BATCH_SIZE,
+    DEFAULT_DECISION_TIMEOUT_S,
+    load_for,
+    run_batch_task,
+)
+from cdr_bench.evaluate.seeds import episode_seeds
+from cdr_bench.scenarios import ScenarioConfig, list_scenarios, load_scenario
+
+PAPER_EPISODES = 1000
+SUITES: dict[str, tuple[str, ...]] = {
+    "paper": (
+        "low",
+        "medium",
+        "high",
+        "tactical/head-on",
+        "tactical/crossing",
+        "tactical/overtaking",
+    ),
+}
+"""Named suites: scenario names, each run at ``PAPER_EPISODES`` episodes unless overridden."""
+
+SEED_DERIVATION = (
+    "seed_i = int(sha256(f'{base_seed}/{scenario_id}/{config_hash}/{i}')[:8], big-endian) >> 1"
+)
+
+
+@dataclass(frozen=True)
+class Job:
+    config: ScenarioConfig
+    episodes: int
+
+
+def resolve_jobs(
+    scenarios: Sequence[str], suite: str | None, episodes: int | None
+) -> tuple[list[Job], list[str]]:
+    """The scenarios to run (explicit ``scenarios`` first, then the suite's) and notes about
+    suite members that are not installed."""
+    notes: list[str] = []
+    names: list[str] = list(scenarios)
+    if suite is not None:
+        if suite not in SUITES:
+            raise CLIError(f"unknown suite {suite!r} (known: {', '.join(SUITES)})")
+        known = set(list_scenarios())
+        for name in SUITES[suite]:
+            if name in known:
+                names.append(name)
+            else:
+                notes.append(f"suite {suite}: scenario {name} is not installed, skipped")
+    if not names:
+        raise CLIError("no scenarios to run")
+    n = PAPER_EPISODES if episodes is None else episodes
+    if n < 1:
+        raise CLIError(f"--episodes must be >= 1, got {n}")
+    jobs, seen = [], set()
+    for name in names:
+        cfg = load_scenario(name)
+        if cfg.id in seen:
+            raise CLIError(f"scenario {cfg.id} given twice")
+        seen.add(cfg.id)
+        jobs.append(Job(cfg, n))
+    return jobs, notes
+
+
+def default_out(agent_path: str | os.PathLike[str], jobs: list[Job], suite: str | None) -> Path:
+    """``results/<agent>/<suite or scenario>.json``."""
+    from cdr_bench.evaluate.loader import agent_name
+
+    if suite is not None and len(jobs) > 0:
+        stem = suite
+    else:
+        stem = "+".join(j.config.id.replace("/", "_") for j in jobs)
+    return Path("results") / agent_name(agent_path) / f"{stem}.json"
+
+
+def evaluate(
+    agent_path: str | os.PathLike[str],
+    jobs: list[Job],
+    out: str | os.PathLike[str],
+    *,
+    base_seed: int = 0,
+    suite: str | None = None,
+    workers: int = 1,
+    resume: bool = False,
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    decision_timeout_s: float = DEFAULT_DECISION_TIMEOUT_S,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run every job, write ``out`` (JSON) and its JSONL, and return the result dict.
+
+    Raises :class:`AgentError` (nothing written, checkpoint removed) when the agent cannot be
+    loaded or misbehaves; an interruption leaves only the checkpoint ``<out>.partial.jsonl``.
+    """
+    out = Path(out)
+    if out.suffix != ".json":
+        raise CLIError(f"--out {out}: expected a .json path")
+    if workers < 1:
+        raise CLIError(f"--workers must be >= 1, got {workers}")
+    if batch_size < 1:
+        raise CLIError(f"--batch-size must be >= 1, got {batch_size}")
+    identity = agent_identity(agent_path)
+    agent_file = str(Path(agent_path).resolve())
+    for job in jobs:  # load errors now, in this process, before any work
+        load_for(agent_file, job.config)
+
+    versions = rf.package_versions()
+    scen_keys = [
+        {"id": j.config.id, "config_hash": j.config.config_hash(), "episodes": j.episodes}
+        for j in jobs
+    ]
+    run_key = rf.sha256_text(
+        rf.canonical(
+            {
+                "schema_version": rf.SCHEMA_VERSION,
+                "agent": identity["sha256"],
+                "scenarios": scen_keys,
+                "base_seed": base_seed,
+                "batch_size": batch_size,
+                "versions": versions,
+            }
+        )
+    )
+    log = rf.PartialLog(rf.partial_path(out), run_key)
+    done: dict[tuple[str, int], dict[str, Any]] = {}
+    if resume:
+        try:
+            done = log.load()
+        except ValueError as e:
+            raise CLIError(str(e)) from None
+        if not log.path.exists():
+            print(f"cdr-bench: no checkpoint {log.path}, starting from scratch", file=sys.stderr)
+    if not log.path.exists() or not resume:
+        log.start({"run_key": run_key, "agent": identity["path"], "scenarios": scen_keys})
+
+    tasks = []
+    for j in jobs:
+        for k in range(math.ceil(j.episodes / batch_size)):
+            if (j.config.id, k) not in done:
+                tasks.append(
+                    (agent_file, j.config, base_seed, k, batch_size, j.episodes, decision_timeout_s)
+                )
+    total = sum(j.episodes for j in jobs)
+    already = sum(len(b["episodes"]) for b in done.values())
+    bar = _progress(total, already, identity["name"], progress)
+    t0 = time.perf_counter()
+    try:
+        for batch in _run_tasks(tasks, workers):
+            log.append(batch)
+            done[(batch["scenario"], batch["batch"])] = batch
+            bar.update(len(batch["episodes"]))
+    except AgentError:
+        bar.close()
+        log.remove()
+        raise
+    except KeyboardInterrupt:
+        bar.close()
+        print(
+            f"cdr-bench: interrupted; finished batches are kept in {log.path}, "
+            "finish with the same command and --resume",
+            file=sys.stderr,
+        )
+        raise
+    bar.close()
+    wall = time.perf_counter() - t0
+
+    scenarios_out, all_episodes, latency = [], [], {}
+    for j in jobs:
+        cid = j.config.id
+        batches = sorted((b for (s, _), b in done.items() if s == cid), key=lambda b: b["batch"])
+        eps = [e for b in batches for e in b["episodes"]]
+        seeds = episode_seeds(base_seed, cid, j.config.config_hash(), 0, j.episodes)
+        if [e["seed"] for e in eps] != seeds:  # pragma: no cover - guards the checkpoint logic
+            raise RuntimeError(f"episodes of {cid} are incomplete or out of order")
+        all_episodes += [{"scenario": cid, **e} for e in eps]
+        scenarios_out.append(
+            {
+                "id": cid,
+                "config_hash": j.config.config_hash(),
+                "config": j.config.to_dict(),
+                "episodes": j.episodes,
+                "seeds_sha256": rf.sha256_text(",".join(map(str, seeds))),
+                "metrics": scenario_metrics(eps),
+            }
+        )
+        latency[cid] = latency_summary(
+            [x for b in batches for x in b["timing"]["per_decision_ms"]],
+            [x for b in batches for x in b["timing"]["per_call_ms"]],
+        )
+    ran = total - already
+    result = {
+        "schema_version": rf.SCHEMA_VERSION,
+        "kind": rf.RESULT_KIND,
+        "agent": identity,
+        "suite": suite,
+        "base_seed": base_seed,
+        "batch_size": batch_size,
+        "seed_derivation": SEED_DERIVATION,
+        "versions": versions,
+        "run_key": run_key,
+        "episodes_file": rf.episodes_path(out).name,
+        "scenarios": scenarios_out,
+        "timing": {
+            "note": "not reproducible: excluded from result identity",
+            "wall_s": round(wall, 3),
+            "episodes_run": ran,
+            "episodes_per_s": round(ran / wall, 2) if wall > 0 and ran else None,
+            "workers": workers,
+            "resumed": bool(already),
+            "decision_timeout_s": decision_timeout_s,
+            "decision_latency": latency,
+        },
+    }
+    rf.write_results(out, result, all_episodes)
+    log.remove()
+    return result
+
+
+def _run_tasks(tasks: list[tuple[Any, ...]], workers: int):
+    if workers == 1 or len(tasks) <= 1:
+        for t in tasks:
+            yield run_batch_task(*t)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    ctx = multiprocessing.get_context("spawn")
+    ex = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+    try:
+        pending = {ex.submit(run_batch_task, *t) for t in tasks}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in sorted(finished, key=lambda f: id(f)):
+                yield f.result()
+    finally:
+        ex.shutdown(wait=False, cancel_futures=True)
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress(total: int, initial: int, name: str, enabled: bool) -> Any:
+    if not enabled:
+        return _NoBar()
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency of the evaluate extra
+        return _NoBar()
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc=f"evaluate {name}",
+        unit="ep",
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )

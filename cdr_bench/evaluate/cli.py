@@ -1,0 +1,137 @@
+"""``cdr-bench evaluate``, ``cdr-bench compare`` and ``cdr-bench report``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from cdr_bench.cli import CLIError
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="score an agent on identical episodes (default: the paper suite)",
+        description="Score an agent file (or folder with agent.py) on the paper's metrics. "
+        "Default: the paper suite (low, medium, high and the tactical scenarios, 1000 episodes "
+        "each). Writes a result JSON and a per-episode JSONL beside it.",
+    )
+    p.add_argument("agent", help="agent .py file, or a folder holding agent.py")
+    p.add_argument(
+        "--scenario",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="registry name or YAML path (repeatable); replaces the default suite",
+    )
+    p.add_argument("--suite", default=None, help="named suite: paper (the default)")
+    p.add_argument("--episodes", type=int, default=None, help="episodes per scenario (1000)")
+    p.add_argument("--seed", type=int, default=0, help="base seed of the episode seeds (0)")
+    p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
+    p.add_argument("--workers", type=int, default=1, help="processes running batches (1)")
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    p.add_argument(
+        "--batch-size",
+        type=int,
+        default=None,
+        help="episodes stepped in lock-step per batch (200); part of the result key",
+    )
+    p.add_argument(
+        "--decision-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="time limit of one decision call (10 s)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_evaluate)
+
+    c = sub.add_parser("compare", help="paired comparison of two results on the same episodes")
+    c.add_argument("result_a")
+    c.add_argument("result_b")
+    c.add_argument("--json", default=None, help="also write the comparison as JSON here")
+    c.set_defaults(func=_compare)
+
+    r = sub.add_parser("report", help="Markdown table of result files (results/README.md)")
+    r.add_argument("results", nargs="+", help="result JSON files")
+    r.add_argument("--out", default=None, help="write here instead of printing")
+    r.add_argument(
+        "--update-readme",
+        default=None,
+        metavar="FILE",
+        help="also write the compact table between the <!-- reference-agents --> markers of FILE",
+    )
+    r.set_defaults(func=_report)
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
+    from cdr_bench.evaluate.report import summary_table
+    from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE, DEFAULT_DECISION_TIMEOUT_S
+
+    suite = args.suite if (args.suite or args.scenario) else "paper"
+    jobs, notes = resolve_jobs(args.scenario, suite, args.episodes)
+    for n in notes:
+        print(f"cdr-bench: note: {n}", file=sys.stderr)
+    out = Path(args.out) if args.out else default_out(args.agent, jobs, suite)
+    result = evaluate(
+        args.agent,
+        jobs,
+        out,
+        base_seed=args.seed,
+        suite=suite,
+        workers=args.workers,
+        resume=args.resume,
+        batch_size=args.batch_size or DEFAULT_BATCH_SIZE,
+        decision_timeout_s=(
+            DEFAULT_DECISION_TIMEOUT_S if args.decision_timeout is None else args.decision_timeout
+        ),
+        progress=not args.no_progress,
+    )
+    print(summary_table(result))
+    print(f"wrote {out} and {out.with_suffix('.jsonl')}")
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from cdr_bench.evaluate.compare import compare, comparison_table
+    from cdr_bench.evaluate.results import atomic_write_text
+
+    cmp = compare(args.result_a, args.result_b)
+    print(comparison_table(cmp))
+    if args.json:
+        atomic_write_text(Path(args.json), json.dumps(cmp, indent=1) + "\n")
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from cdr_bench.evaluate.report import compact_table, results_readme, update_marked_block
+    from cdr_bench.evaluate.results import atomic_write_text, read_result
+
+    loaded = []
+    for p in args.results:
+        try:
+            loaded.append((p, read_result(p)))
+        except ValueError as e:
+            raise CLIError(str(e)) from None
+    cmd = "cdr-bench report " + " ".join(args.results) + (f" --out {args.out}" if args.out else "")
+    if args.update_readme:
+        cmd += f" --update-readme {args.update_readme}"
+    text = results_readme(loaded, cmd)
+    if args.update_readme:
+        readme = Path(args.update_readme)
+        try:
+            new = update_marked_block(readme.read_text(), compact_table(loaded))
+        except (OSError, ValueError) as e:
+            raise CLIError(f"--update-readme {readme}: {e}") from None
+        atomic_write_text(readme, new)
+        print(f"updated {readme}")
+    if args.out:
+        atomic_write_text(Path(args.out), text)
+        print(f"wrote {args.out}")
+    else:
+        print(text, end="")
+    return 0

@@ -1,0 +1,148 @@
+"""Paired comparison of two results run on the same episodes (``cdr-bench compare A B``).
+
+Both results must hold the same scenarios with the same config hash, episode count and episode
+seeds (common random numbers); anything else is refused. For each scenario, aircraft role and
+metric the difference B - A comes with a 95 % paired percentile-bootstrap interval: episodes are
+resampled jointly for both agents (2000 resamples, fixed seed), and a metric is the ratio of
+per-episode sums (so learning intruders are resampled as whole episodes).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cdr_bench.cli import CLIError
+from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
+from cdr_bench.evaluate.results import read_episodes, read_result
+
+# metric -> (numerator, denominator) of one aircraft record
+_METRICS: dict[str, tuple[Any, Any]] = {
+    "success_rate": (lambda r: r["outcome"] == "success", lambda r: 1),
+    "los_rate": (lambda r: r["los"], lambda r: 1),
+    "nmac_rate": (lambda r: r["outcome"] == "nmac", lambda r: 1),
+    "timeout_rate": (lambda r: r["outcome"] == "timeout", lambda r: 1),
+    "avg_steps_success": (
+        lambda r: r["steps"] if r["outcome"] == "success" else 0,
+        lambda r: r["outcome"] == "success",
+    ),
+    "clean_success_rate": (lambda r: r["outcome"] == "success" and not r["los"], lambda r: 1),
+    "goal_reward": (lambda r: r["goal_reward"], lambda r: 1),
+    "safety_reward": (lambda r: r["safety_reward"], lambda r: 1),
+    "invalid_action_rate": (lambda r: r["invalid_actions"], lambda r: r["steps"]),
+}
+
+
+def _sums(episodes: list[dict[str, Any]], role: str) -> dict[str, NDArray[np.float64]]:
+    out = {}
+    for name, (num, den) in _METRICS.items():
+        nd = np.zeros((len(episodes), 2))
+        for i, ep in enumerate(episodes):
+            for ac in ep["aircraft"]:
+                if role_of(ac["id"]) == role:
+                    nd[i, 0] += float(num(ac))
+                    nd[i, 1] += float(den(ac))
+        out[name] = nd
+    return out
+
+
+def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any:
+    if idx is None:
+        d = nd[:, 1].sum()
+        return nd[:, 0].sum() / d if d > 0 else np.nan
+    num, den = nd[idx, 0].sum(axis=-1), nd[idx, 1].sum(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
+
+
+def compare(path_a: str | os.PathLike[str], path_b: str | os.PathLike[str]) -> dict[str, Any]:
+    """Per-metric paired differences B - A; :class:`CLIError` if not on the same episodes."""
+    try:
+        a, b = read_result(path_a), read_result(path_b)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    sa = {s["id"]: s for s in a["scenarios"]}
+    sb = {s["id"]: s for s in b["scenarios"]}
+    if set(sa) != set(sb):
+        raise CLIError(
+            f"not the same episodes: scenarios {sorted(sa)} in {path_a} vs {sorted(sb)} in {path_b}"
+        )
+    for sid in sa:
+        for key in ("config_hash", "episodes", "seeds_sha256"):
+            if sa[sid][key] != sb[sid][key]:
+                raise CLIError(
+                    f"not the same episodes: scenario {sid} differs in {key} "
+                    f"({sa[sid][key]} vs {sb[sid][key]}); run both with the same scenario "
+                    "version, --episodes and --seed"
+                )
+    try:
+        ea, eb = read_episodes(path_a, a), read_episodes(path_b, b)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    rows = []
+    for sid in sa:
+        xa = [e for e in ea if e["scenario"] == sid]
+        xb = [e for e in eb if e["scenario"] == sid]
+        if [e["seed"] for e in xa] != [e["seed"] for e in xb]:
+            raise CLIError(f"not the same episodes: per-episode seeds of {sid} differ")
+        n = len(xa)
+        idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
+        for role in sa[sid]["metrics"]:
+            if role not in sb[sid]["metrics"]:
+                continue
+            na, nb = _sums(xa, role), _sums(xb, role)
+            for name in _METRICS:
+                va, vb = float(_ratio(na[name])), float(_ratio(nb[name]))
+                diffs = _ratio(nb[name], idx) - _ratio(na[name], idx)
+                diffs = diffs[np.isfinite(diffs)]
+                lo, hi = (
+                    (float(np.percentile(diffs, 2.5)), float(np.percentile(diffs, 97.5)))
+                    if diffs.size
+                    else (np.nan, np.nan)
+                )
+                rows.append(
+                    {
+                        "scenario": sid,
+                        "aircraft": role,
+                        "metric": name,
+                        "a": va,
+                        "b": vb,
+                        "diff": vb - va,
+                        "ci95": [lo, hi],
+                        "significant": bool(lo > 0 or hi < 0),
+                    }
+                )
+    return {
+        "a": {"path": str(path_a), "agent": a["agent"]["name"]},
+        "b": {"path": str(path_b), "agent": b["agent"]["name"]},
+        "rows": rows,
+    }
+
+
+def comparison_table(cmp: dict[str, Any]) -> str:
+    a, b = cmp["a"]["agent"], cmp["b"]["agent"]
+    head = ["scenario", "aircraft", "metric", f"A={a}", f"B={b}", "B-A", "95% paired CI", ""]
+    rows = [head]
+    for r in cmp["rows"]:
+        pct = r["metric"].endswith("_rate")
+        f = (lambda x: f"{100 * x:.1f}%") if pct else (lambda x: f"{x:.3f}")
+        g = (lambda x: f"{100 * x:+.1f}") if pct else (lambda x: f"{x:+.3f}")
+        lo, hi = r["ci95"]
+        rows.append(
+            [
+                r["scenario"],
+                r["aircraft"],
+                r["metric"],
+                f(r["a"]),
+                f(r["b"]),
+                g(r["diff"]),
+                f"[{g(lo)}, {g(hi)}]",
+                "*" if r["significant"] else "",
+            ]
+        )
+    w = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    return "\n".join("  ".join(c.ljust(x) for c, x in zip(r, w, strict=True)) for r in rows)

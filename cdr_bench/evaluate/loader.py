@@ -1,0 +1,190 @@
+"""Load an agent file (or a folder with ``agent.py``) by path; see :mod:`.protocol`.
+
+Every failure is an :class:`AgentError` (a ``CLIError``: one line, exit code 2) naming the file
+and, where the agent's own code raised, the agent's own line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import traceback
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cdr_bench.cli import CLIError
+
+_SKIP_DIRS = {"__pycache__", ".git", ".ipynb_checkpoints"}
+
+
+class AgentError(CLIError):
+    """The agent could not be loaded or misbehaved; the message says where and how."""
+
+
+def resolve_agent_path(path: str | os.PathLike[str]) -> Path:
+    """The agent's Python file: ``path`` itself, or ``path/agent.py`` for a folder."""
+    p = Path(path)
+    if p.is_dir():
+        if not (p / "agent.py").is_file():
+            raise AgentError(f"agent folder {path} has no agent.py")
+        return (p / "agent.py").resolve()
+    if not p.exists():
+        raise AgentError(f"agent file {path} not found")
+    if p.suffix != ".py":
+        raise AgentError(f"agent file {path}: expected a .py file or a folder with agent.py")
+    return p.resolve()
+
+
+def agent_name(path: str | os.PathLike[str]) -> str:
+    """``mvp`` for ``agents/mvp/agent.py`` or ``agents/mvp``; the file stem otherwise."""
+    f = resolve_agent_path(path)
+    return f.parent.name if f.name == "agent.py" else f.stem
+
+
+def agent_files(path: str | os.PathLike[str]) -> list[Path]:
+    """Files that make up the agent: its folder (code and checkpoint) when the agent is a folder
+    or a file named ``agent.py``, else the single file."""
+    f = resolve_agent_path(path)
+    if f.name != "agent.py":
+        return [f]
+    out = []
+    for root, dirs, names in os.walk(f.parent):
+        dirs[:] = sorted(d for d in dirs if d not in _SKIP_DIRS and not d.startswith("."))
+        for n in sorted(names):
+            if not n.endswith((".pyc", ".pyo")) and not n.startswith("."):
+                out.append(Path(root) / n)
+    return sorted(out)
+
+
+def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Path, name and SHA-256 of every file of the agent (relative names), plus one combined
+    hash over them: identifies exactly what was scored."""
+    f = resolve_agent_path(path)
+    base = f.parent
+    files = {}
+    for p in agent_files(path):
+        h = hashlib.sha256()
+        with open(p, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        files[p.relative_to(base).as_posix()] = h.hexdigest()
+    combined = hashlib.sha256(
+        "\n".join(f"{k} {v}" for k, v in sorted(files.items())).encode()
+    ).hexdigest()
+    return {
+        "name": agent_name(path),
+        "path": os.path.relpath(f) if not os.path.relpath(f).startswith("..") else str(f),
+        "entry": f.name,
+        "files": files,
+        "sha256": combined,
+    }
+
+
+def agent_error_line(exc: BaseException, agent_file: Path) -> str:
+    """``agent.py:12: <the line>: ValueError: message`` for the innermost frame inside the
+    agent's folder (or the innermost frame at all), then the exception itself."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    root = agent_file.parent if agent_file.name == "agent.py" else None
+    mine = [
+        fr
+        for fr in frames
+        if Path(fr.filename).resolve() == agent_file
+        or (root is not None and Path(fr.filename).resolve().is_relative_to(root))
+    ]
+    what = "".join(traceback.format_exception_only(type(exc), exc)).strip().splitlines()
+    what_line = what[-1] if what else type(exc).__name__
+    if isinstance(exc, SyntaxError):
+        return f"{Path(exc.filename or agent_file).name}:{exc.lineno}: {what_line}"
+    chosen = mine or list(frames)
+    if not chosen:
+        return what_line
+    fr = chosen[-1]
+    code = f" `{fr.line.strip()}`" if fr.line else ""
+    return f"{Path(fr.filename).name}:{fr.lineno}:{code}: {what_line}"
+
+
+def _import_file(f: Path) -> ModuleType:
+    digest = hashlib.sha256(str(f).encode()).hexdigest()[:12]
+    mod_name = f"cdr_bench_agent_{f.stem}_{digest}"
+    spec = importlib.util.spec_from_file_location(mod_name, f)
+    if spec is None or spec.loader is None:  # pragma: no cover - .py files always have one
+        raise AgentError(f"agent file {f}: cannot be imported")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = module
+    sys.path.insert(0, str(f.parent))  # an agent folder may hold helper modules
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as e:
+        sys.modules.pop(mod_name, None)
+        raise AgentError(f"agent file {f}: syntax error: {agent_error_line(e, f)}") from None
+    except Exception as e:
+        sys.modules.pop(mod_name, None)
+        raise AgentError(f"agent file {f}: import failed: {agent_error_line(e, f)}") from None
+    finally:
+        try:
+            sys.path.remove(str(f.parent))
+        except ValueError:  # pragma: no cover - the agent removed it itself
+            pass
+    return module
+
+
+class LoadedAgent:
+    """An agent instance behind the full protocol: ``act``, ``act_batch`` (native or row by row)
+    and ``reset`` (a no-op when the agent has none)."""
+
+    def __init__(self, instance: Any, path: Path):
+        self.instance = instance
+        self.path = path
+        self.name = path.parent.name if path.name == "agent.py" else path.stem
+        self.has_act_batch = callable(getattr(instance, "act_batch", None))
+        self._reset = getattr(instance, "reset", None)
+
+    def act(self, observation: dict[str, NDArray[Any]]) -> Any:
+        return self.instance.act(observation)
+
+    def act_batch(self, observations: NDArray[np.float32], masks: NDArray[np.int8]) -> Any:
+        if self.has_act_batch:
+            return self.instance.act_batch(observations, masks)
+        return [
+            self.instance.act({"observation": o, "action_mask": m})
+            for o, m in zip(observations, masks, strict=True)
+        ]
+
+    def reset(self, seed: int) -> None:
+        if callable(self._reset):
+            self._reset(seed)
+
+
+def load_agent(
+    path: str | os.PathLike[str], observation_space: Any, action_space: Any
+) -> LoadedAgent:
+    """Import the agent file at ``path`` and construct ``Agent(observation_space, action_space)``.
+
+    Raises :class:`AgentError` for a missing file, a syntax or import error, a file without a
+    class ``Agent``, an ``Agent`` without ``act`` and a constructor that raises.
+    """
+    f = resolve_agent_path(path)
+    module = _import_file(f)
+    cls = getattr(module, "Agent", None)
+    if cls is None:
+        raise AgentError(
+            f"agent file {f} defines no `Agent` (see agents/template/agent.py for the protocol)"
+        )
+    if not callable(cls):
+        raise AgentError(f"agent file {f}: `Agent` is not a class but {type(cls).__name__}")
+    if not callable(getattr(cls, "act", None)):
+        raise AgentError(f"agent file {f}: `Agent` has no act(observation) method")
+    try:
+        instance = cls(observation_space, action_space)
+    except Exception as e:
+        raise AgentError(
+            f"agent file {f}: Agent(observation_space, action_space) raised: "
+            f"{agent_error_line(e, f)}"
+        ) from None
+    return LoadedAgent(instance, f)

@@ -1,0 +1,169 @@
+"""Result files: a JSON summary per run and a per-episode JSONL beside it, both written
+atomically (temporary file + ``os.replace``), and the partial checkpoint used by ``--resume``.
+
+Layout of ``<out>.json`` (``schema_version`` 1)::
+
+    schema_version, kind, agent {name, path, entry, files {name: sha256}, sha256},
+    suite, base_seed, batch_size, seed_derivation, versions {cdr_bench, python, numpy, ...},
+    scenarios [{id, config_hash, config, episodes, seeds_sha256, metrics {ownship, intruders}}],
+    episodes_file, run_key,
+    timing {wall_s, episodes_per_s, workers, resumed, decision_latency {per scenario}}
+
+Everything outside ``timing`` is a function of the agent's files, the scenarios, the base seed,
+the batch size and the package versions: an interrupted run finished with ``--resume`` (or a run
+with any ``--workers``) gives a byte-identical JSONL and a JSON identical outside ``timing``.
+
+``<out>.jsonl``: one line per episode and scenario, sorted by scenario (in run order) then
+episode: ``{"scenario", "episode", "seed", "steps", "aircraft": [per-aircraft record]}``.
+
+``<out>.partial.jsonl`` (only while a run is unfinished): a header line with the ``run_key``,
+then one line per finished batch (appended and fsync'ed); a torn last line is ignored.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import tempfile
+from collections.abc import Iterable
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+SCHEMA_VERSION = 1
+RESULT_KIND = "cdr-bench evaluation"
+
+
+def canonical(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
+
+
+def sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def package_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for dist in ("cdr-bench", "numpy", "gymnasium", "pettingzoo", "pyyaml"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:  # pragma: no cover - optional
+            out[dist] = "not installed"
+    return out
+
+
+def episodes_path(out: Path) -> Path:
+    return out.with_suffix(".jsonl")
+
+
+def partial_path(out: Path) -> Path:
+    return out.with_suffix(".partial.jsonl")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` so that readers see the old file or the new one, never a
+    part: temporary file in the same folder, fsync, ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; results are ordinary files
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def jsonl_text(rows: Iterable[dict[str, Any]]) -> str:
+    return "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
+
+
+class PartialLog:
+    """The append-only checkpoint of an unfinished run."""
+
+    def __init__(self, path: Path, run_key: str):
+        self.path = path
+        self.run_key = run_key
+
+    def load(self) -> dict[tuple[str, int], dict[str, Any]]:
+        """Finished batches keyed by (scenario id, batch index). Raises ``ValueError`` if the
+        file belongs to another run."""
+        done: dict[tuple[str, int], dict[str, Any]] = {}
+        if not self.path.exists():
+            return done
+        with open(self.path, encoding="utf-8") as f:
+            lines = f.read().split("\n")
+        good_bytes = 0
+        for i, line in enumerate(lines):
+            if not line:
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                break  # torn last line of a killed run
+            if i == 0:
+                if row.get("kind") != "header" or row.get("run_key") != self.run_key:
+                    raise ValueError(
+                        f"{self.path} belongs to a different run (other agent files, scenarios, "
+                        "seed, episodes or batch size); delete it or run without --resume"
+                    )
+            elif row.get("kind") == "batch":
+                done[(row["scenario"], int(row["batch"]))] = row
+            good_bytes += len(line.encode()) + 1
+        with open(self.path, "r+b") as f:  # drop a torn tail so appends start on a new line
+            f.truncate(good_bytes)
+        return done
+
+    def start(self, header: dict[str, Any]) -> None:
+        atomic_write_text(self.path, json.dumps({"kind": "header", **header}) + "\n")
+
+    def append(self, batch: dict[str, Any]) -> None:
+        line = json.dumps({"kind": "batch", **batch}, separators=(",", ":")) + "\n"
+        with open(self.path, "a", encoding="utf-8") as f:
+            f.write(line)
+            f.flush()
+            os.fsync(f.fileno())
+
+    def remove(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
+def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, Any]]) -> None:
+    """The per-episode JSONL first, then the JSON that refers to it (both atomic)."""
+    atomic_write_text(episodes_path(out), jsonl_text(episodes))
+    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
+
+
+def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A result JSON, checked for kind and schema version (``ValueError`` otherwise)."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"{p}: no such result file") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{p}: not a JSON result file ({e})") from None
+    if not isinstance(data, dict) or data.get("kind") != RESULT_KIND:
+        raise ValueError(f"{p}: not a cdr-bench evaluation result")
+    if data.get("schema_version") != SCHEMA_VERSION:
+        raise ValueError(
+            f"{p}: schema_version {data.get('schema_version')!r}, this cdr-bench reads "
+            f"{SCHEMA_VERSION}"
+        )
+    return data
+
+
+def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:
+    """The per-episode records beside a result JSON."""
+    p = Path(result_path).parent / result["episodes_file"]
+    if not p.exists():
+        raise ValueError(f"{p}: per-episode file of {result_path} is missing")
+    with open(p, encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]
