@@ -21,7 +21,12 @@ class CLIError(Exception):
 
 
 # Modules that add subcommands; a module missing from an install is skipped.
-_SUBCOMMAND_MODULES = ("cdr_bench.cli", "cdr_bench.evaluate.cli")
+_SUBCOMMAND_MODULES = (
+    "cdr_bench.cli",
+    "cdr_bench.evaluate.cli",
+    "cdr_bench.rl.cli",
+    "cdr_bench.leaderboard.cli",
+)
 
 
 def register(sub: Any) -> None:

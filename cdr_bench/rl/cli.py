@@ -1,0 +1,279 @@
+"""Subcommands ``train``, ``multimodal`` and ``latency`` (registered by cdr_bench.cli).
+
+Standalone: ``python -m cdr_bench.rl.cli train diffusion-ac --total-steps 200``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+TRAINERS: dict[str, str] = {
+    "diffusion-ac": "cdr_bench.rl.train_diffusion_ac",
+}
+"""``cdr-bench train NAME``: trainer modules. Each exposes ``add_arguments(parser)`` (its flags)
+and ``run(namespace) -> dict`` (train, write the run directory, return a JSON summary)."""
+
+
+class _CLIErrorFallback(Exception):
+    pass
+
+
+def _cli_error() -> type[Exception]:
+    try:
+        from cdr_bench.cli import CLIError
+
+        return CLIError
+    except ImportError:  # pragma: no cover
+        return _CLIErrorFallback
+
+
+def register(sub: Any) -> None:
+    tr = sub.add_parser("train", help="train a learned reference agent")
+    algos = tr.add_subparsers(dest="algorithm", required=True, metavar="ALGORITHM")
+    for name, module_name in TRAINERS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as e:  # torch / SB3 missing: say how to get them, at run time
+            p = algos.add_parser(name, help=f"(needs the train extra: {e.name} is not installed)")
+            p.add_argument("rest", nargs=argparse.REMAINDER)
+            p.set_defaults(func=_missing_extra(name, str(e.name)))
+            continue
+        p = algos.add_parser(
+            name,
+            help=(module.__doc__ or name).strip().splitlines()[0],
+            description=module.__doc__,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.add_arguments(p)
+        p.set_defaults(func=_train_with(module))
+
+    mm = sub.add_parser("multimodal", help="distribution of successful first actions (§5.4)")
+    mm.add_argument("agent", help="agent directory or agent.py")
+    mm.add_argument("--scenario", default="tactical/head-on")
+    mm.add_argument("--samples", type=int, default=1000)
+    mm.add_argument("--seed", type=int, default=0)
+    mm.add_argument(
+        "--max-steps",
+        type=int,
+        default=0,
+        help="cut follow-on rollouts after this many steps (a failure); 0 = horizon",
+    )
+    mm.add_argument("--threshold", type=float, default=0.05, help="mass threshold of a mode")
+    mm.add_argument("--out", default=None, help="JSON results file (and a .png heat map beside it)")
+    mm.set_defaults(func=cmd_multimodal)
+
+    la = sub.add_parser("latency", help="decision latency (median / p99 ms) per batch size")
+    la.add_argument("agent", help="agent directory or agent.py")
+    la.add_argument("--batch-sizes", default="1,8,64,256")
+    la.add_argument("--repeats", type=int, default=50)
+    la.add_argument("--scenario", default="medium")
+    la.add_argument("--threads", type=int, default=1)
+    la.add_argument("--out", default=None)
+    la.set_defaults(func=cmd_latency)
+
+
+def _missing_extra(name: str, missing: str) -> Any:
+    def fail(ns: argparse.Namespace) -> int:
+        raise _cli_error()(
+            f"training {name} needs {missing!r}: pip install torch==2.13.0 'cdr-bench[train]'"
+        )
+
+    return fail
+
+
+def _train_with(module: Any) -> Any:
+    def cmd_train(ns: argparse.Namespace) -> int:
+        try:
+            summary = module.run(ns)
+        except ValueError as e:
+            raise _cli_error()(str(e)) from None
+        print(json.dumps(summary, indent=1))
+        return 0
+
+    return cmd_train
+
+
+def _load(agent: str):
+    from cdr_bench.evaluate.loader import load_agent
+
+    return load_agent(agent, None, None)
+
+
+def _check_scenario(name: str) -> None:
+    from cdr_bench.scenarios import load_scenario
+
+    try:
+        load_scenario(name)
+    except Exception as e:
+        raise _cli_error()(f"scenario {name!r}: {e}") from None
+
+
+def first_action_distribution(
+    agent, scenario: str, samples: int, seed: int = 0, max_steps: int = 0
+) -> dict:
+    """Sample the first action ``samples`` times from the scenario's start (one batched call, so
+    every row draws its own noise), then validate each by a follow-on rollout with the same
+    agent. Returns counts per first action of all samples and of successful ones."""
+    from cdr_bench.scenarios import load_scenario
+    from cdr_bench.sim import Simulator, observe
+    from cdr_bench.sim.core import SUCCESS
+
+    cfg = load_scenario(scenario)
+    sim = Simulator(cfg, n_episodes=samples)
+    sim.reset(np.full(samples, seed))
+    agent.reset(seed)
+    first = None
+    t = 0
+    while sim.ac_active.any() and not (max_steps and t >= max_steps):
+        t += 1
+        obs, masks = observe(sim)[:, 0], sim.action_masks()[:, 0]
+        flying = sim.ac_active[:, 0]
+        a = np.full(samples, 13, dtype=np.int64)
+        a[flying] = np.asarray(agent.act_batch(obs[flying], masks[flying]), dtype=np.int64)
+        if first is None:
+            first = a.copy()
+        act = np.full((samples, sim.M), 13, dtype=np.int64)
+        act[:, 0] = a
+        sim.step(act)
+    ok = sim.ac_outcome[:, 0] == SUCCESS
+    assert first is not None, "the scenario ended before the first decision"
+    return {
+        "all": np.bincount(first, minlength=27).tolist(),
+        "success": np.bincount(first[ok], minlength=27).tolist(),
+        "success_rate": float(ok.mean()),
+    }
+
+
+def mode_summary(counts: list[int], threshold: float = 0.05) -> dict:
+    c = np.asarray(counts, float)
+    if c.sum() == 0:
+        return {"modes": 0, "normalised_entropy": 0.0}
+    p = c / c.sum()
+    nz = p[p > 0]
+    return {
+        "modes": int((p >= threshold).sum()),
+        "normalised_entropy": max(0.0, float(-(nz * np.log(nz)).sum() / math.log(27))),
+    }
+
+
+def heatmap(counts: list[int], title: str, out_png: str) -> None:
+    """Fig. 9 style: three 3x3 panels (descend / level / climb), heading x speed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    c = np.asarray(counts, float).reshape(3, 3, 3)  # (psi, v, h)
+    tot = max(c.sum(), 1.0)
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.6))
+    for j, name in enumerate(("descend", "level", "climb")):
+        ax = axes[j]
+        m = c[:, :, j].T / tot  # rows: speed, cols: heading
+        im = ax.imshow(m, vmin=0, vmax=max(c.max() / tot, 1e-9), cmap="viridis", origin="lower")
+        ax.set_xticks(range(3), ["left", "hold", "right"])
+        ax.set_yticks(range(3), ["slower", "keep", "faster"])
+        ax.set_title(name)
+        for (r, k), v in np.ndenumerate(m):
+            ax.text(k, r, f"{v:.2f}", ha="center", va="center", color="w")
+    fig.colorbar(im, ax=axes, shrink=0.8, label="share of successful samples")
+    fig.suptitle(title)
+    fig.savefig(out_png, dpi=80)
+    plt.close(fig)
+
+
+def cmd_multimodal(ns: argparse.Namespace) -> int:
+    err = _cli_error()
+    if ns.samples < 1:
+        raise err("--samples must be >= 1")
+    _check_scenario(ns.scenario)
+    agent = _load(ns.agent)
+    d = first_action_distribution(agent, ns.scenario, ns.samples, ns.seed, ns.max_steps)
+    summ = mode_summary(d["success"], ns.threshold)
+    res = {
+        "agent": str(ns.agent),
+        "scenario": ns.scenario,
+        "samples": ns.samples,
+        "seed": ns.seed,
+        "threshold": ns.threshold,
+        **d,
+        **summ,
+    }
+    print(
+        f"{ns.scenario}: {ns.samples} samples, follow-on success {d['success_rate']:.3f}, "
+        f"{summ['modes']} mode(s) >= {ns.threshold:.0%}, normalised entropy "
+        f"{summ['normalised_entropy']:.3f}"
+    )
+    for a in np.flatnonzero(d["all"]):
+        from cdr_bench.actions import decode
+
+        print(
+            f"  action {a:2d} {decode(int(a))}: sampled {d['all'][a]:5d}, "
+            f"successful {d['success'][a]:5d}"
+        )
+    if ns.out:
+        Path(ns.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(ns.out).write_text(json.dumps(res, indent=1))
+        heatmap(
+            d["success"],
+            f"{Path(str(ns.agent)).name} on {ns.scenario}",
+            str(Path(ns.out).with_suffix(".png")),
+        )
+    return 0
+
+
+def cmd_latency(ns: argparse.Namespace) -> int:
+    from cdr_bench.scenarios import load_scenario
+    from cdr_bench.sim import Simulator, observe
+
+    try:
+        import torch
+
+        torch.set_num_threads(ns.threads)
+    except ImportError:  # pragma: no cover
+        pass
+    sizes = [int(x) for x in ns.batch_sizes.split(",")]
+    agent = _load(ns.agent)
+    sim = Simulator(load_scenario(ns.scenario), n_episodes=max(sizes))
+    sim.reset(np.arange(max(sizes)))
+    obs, masks = observe(sim)[:, 0], sim.action_masks()[:, 0]
+    rows = []
+    print("| batch | median ms/call | p99 ms/call | median ms/decision |")
+    print("|---:|---:|---:|---:|")
+    for n in sizes:
+        agent.act_batch(obs[:n], masks[:n])  # warm-up
+        ts = []
+        for _ in range(ns.repeats):
+            t0 = time.perf_counter()
+            agent.act_batch(obs[:n], masks[:n])
+            ts.append((time.perf_counter() - t0) * 1e3)
+        med, p99 = float(np.median(ts)), float(np.percentile(ts, 99))
+        rows.append(
+            {"batch": n, "median_ms": med, "p99_ms": p99, "median_ms_per_decision": med / n}
+        )
+        print(f"| {n} | {med:.2f} | {p99:.2f} | {med / n:.3f} |")
+    if ns.out:
+        Path(ns.out).write_text(json.dumps({"agent": str(ns.agent), "rows": rows}, indent=1))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m cdr_bench.rl.cli")
+    register(p.add_subparsers(dest="command", required=True))
+    ns = p.parse_args(argv)
+    try:
+        return ns.func(ns)
+    except _cli_error() as e:
+        print(f"error: {e}")
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,217 @@
+"""Diffusion-AC: the policy (reverse denoising + masked head) and Algorithm 1 (one update).
+
+Config keys (JSON-able, stored in every checkpoint): ``obs_dim, width, n_blocks, n_heads, T,
+schedule, actor ("diffusion" | "categorical"), twin, critic_width``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+
+from cdr_bench.rl.diffusion import Schedule, masked_logits, masked_softmax
+from cdr_bench.rl.networks import (
+    N_ACTIONS,
+    CategoricalActor,
+    Denoiser,
+    TwinCritic,
+    frozen_copy,
+    polyak_update,
+)
+
+
+@dataclass
+class PolicyConfig:
+    obs_dim: int = 42
+    width: int = 128
+    n_blocks: int = 2
+    n_heads: int = 8
+    T: int = 10
+    schedule: str = "cosine"
+    actor: str = "diffusion"
+    twin: bool = True
+    critic_width: int = 128
+
+
+class Policy(torch.nn.Module):
+    """The actor alone (what an agent needs at inference)."""
+
+    def __init__(self, cfg: PolicyConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.schedule = Schedule(cfg.schedule, cfg.T)
+        if cfg.actor == "diffusion":
+            self.net: Any = Denoiser(cfg.obs_dim, cfg.width, cfg.n_blocks, cfg.n_heads)
+        elif cfg.actor == "categorical":
+            self.net = CategoricalActor(cfg.obs_dim, cfg.width, cfg.n_blocks)
+        else:
+            raise ValueError(f"unknown actor {cfg.actor!r}")
+
+    @torch.no_grad()
+    def clean_logits(self, obs: torch.Tensor, generator: torch.Generator | None = None):
+        """y0 for each state: the reverse chain y_T ~ N(0, I) -> y_0 (Eq. 31-32), (N, 27)."""
+        if self.cfg.actor == "categorical":
+            return self.net(obs)
+        sch, n = self.schedule, obs.shape[0]
+        h = self.net.encode(obs)
+        y = torch.randn(n, N_ACTIONS, generator=generator)
+        for t in range(sch.T, 0, -1):
+            y0_hat = self.net.forward_h(h, y, torch.full((n,), t, dtype=torch.long))
+            if t == 1:  # alpha_bar_0 = 1: the mean is y0_hat and beta_tilde_1 = 0
+                return y0_hat
+            mean = sch.posterior_mean(y0_hat, y, t)
+            z = torch.randn(n, N_ACTIONS, generator=generator)
+            y = mean + sch.beta_tilde[t].sqrt() * z
+        return y  # pragma: no cover
+
+    @torch.no_grad()
+    def act(
+        self,
+        obs: torch.Tensor,
+        mask: torch.Tensor,
+        generator: torch.Generator | None = None,
+        sample: bool = False,
+    ) -> torch.Tensor:
+        """Actions (N,). ``sample=False``: argmax of the masked head (the paper's inference; the
+        diffusion actor's stochasticity comes from y_T). ``sample=True``: draw from the masked
+        softmax (Eq. 33), used for exploration during training."""
+        logits = masked_logits(self.clean_logits(obs, generator), mask)
+        if sample:
+            return torch.multinomial(torch.softmax(logits, -1), 1, generator=generator).squeeze(-1)
+        return logits.argmax(-1)
+
+
+@dataclass
+class UpdateConfig:
+    gamma: float = 0.99
+    polyak: float = 5e-3
+    lr_actor: float = 3e-4
+    lr_critic: float = 1e-3
+    eps_smooth: float = 0.01
+    ce_weight: float = 0.1
+    tau_relative: bool = True
+    """temperature relative to the per-state spread of Q (True) or absolute (Eq. 37 literal)"""
+    ce_input: str = "y0"
+    """terminal CE input: "y0" = D(s, y0, 0) as in Eq. 39 (clean teacher logits as input, can be
+    satisfied by copying), "noise" = D(s, y_T ~ N(0, I), T) (the inference input), "none" = no CE"""
+
+
+def teacher_distribution(
+    q: torch.Tensor, mask: torch.Tensor, tau: float, relative: bool = False
+) -> torch.Tensor:
+    """p*(a|s) of Eq. 37 from Q values (N, 27) and masks (N, 27)."""
+    if math.isinf(tau):
+        return masked_softmax(torch.zeros_like(q), mask)
+    if relative:
+        m = mask.to(q.dtype)
+        n = m.sum(-1, keepdim=True)
+        mean = (q * m).sum(-1, keepdim=True) / n
+        std = (((q - mean) ** 2 * m).sum(-1, keepdim=True) / n).sqrt()
+        q = (q - mean) / (std + 1e-6)
+    return masked_softmax(q / tau, mask)
+
+
+class DiffusionAC:
+    """Actor, twin critics, targets and optimisers; :meth:`update` is Algorithm 1."""
+
+    def __init__(self, cfg: PolicyConfig, ucfg: UpdateConfig):
+        self.cfg, self.ucfg = cfg, ucfg
+        self.policy = Policy(cfg)
+        self.critic = TwinCritic(cfg.obs_dim, cfg.critic_width, twin=cfg.twin)
+        self.critic_target: Any = frozen_copy(self.critic)
+        self.opt_actor = torch.optim.Adam(self.policy.parameters(), lr=ucfg.lr_actor)
+        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=ucfg.lr_critic)
+
+    def teacher(self, obs: torch.Tensor, mask: torch.Tensor, tau: float) -> torch.Tensor:
+        """Eq. 37: softmax(min Q / tau) over feasible classes; tau = inf -> uniform over them.
+
+        With ``UpdateConfig.tau_relative`` the temperature is in units of the per-state standard
+        deviation of min Q over the feasible classes (scale-free; see the README)."""
+        with torch.no_grad():
+            q = self.critic.min_q(obs)
+            return teacher_distribution(q, mask, tau, self.ucfg.tau_relative)
+
+    def update(self, b: dict[str, torch.Tensor], tau: float) -> dict[str, float]:
+        u, sch = self.ucfg, self.policy.schedule
+        obs, mask, a = b["obs"], b["mask"], b["action"]
+        # (A) critics: masked double-Q max target (Eq. 34-35).
+        with torch.no_grad():
+            q_next = masked_logits(self.critic_target.min_q(b["next_obs"]), b["next_mask"])
+            y = b["reward"] + u.gamma * (1 - b["done"]) * q_next.max(-1).values
+        q1, q2 = self.critic(obs)
+        q1a = q1.gather(1, a[:, None]).squeeze(1)
+        q2a = q2.gather(1, a[:, None]).squeeze(1)
+        loss_q = ((q1a - y) ** 2).mean()
+        if self.cfg.twin:
+            loss_q = loss_q + ((q2a - y) ** 2).mean()
+        self.opt_critic.zero_grad(set_to_none=True)
+        loss_q.backward()
+        self.opt_critic.step()
+        # (B) teacher (Eq. 37-38) with the updated critics held fixed.
+        p_star = self.teacher(obs, mask, tau)
+        y0 = torch.log(p_star + u.eps_smooth / N_ACTIONS)
+        stats = {"loss_q": loss_q.item(), "q_mean": q1a.mean().item()}
+        if self.cfg.actor == "categorical":
+            logp = torch.log_softmax(masked_logits(self.policy.net(obs), mask), -1)
+            loss_pi = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
+            stats["loss_ce"] = loss_pi.item()
+        else:
+            # (C) forward diffusion, (D) denoising regression + terminal CE (Eq. 39-41).
+            n = obs.shape[0]
+            t = torch.randint(1, sch.T + 1, (n,))
+            yt = sch.q_sample(y0, t, torch.randn_like(y0))
+            net = self.policy.net
+            h = net.encode(obs)
+            loss_diff = ((net.forward_h(h, yt, t) - y0) ** 2).sum(-1).mean()
+            loss_pi = loss_diff
+            stats["loss_diff"] = loss_diff.item()
+            if u.ce_input != "none" and u.ce_weight > 0:
+                if u.ce_input == "y0":
+                    term = net.forward_h(h, y0, torch.zeros(n, dtype=torch.long))
+                else:
+                    term = net.forward_h(h, torch.randn_like(y0), torch.full((n,), sch.T))
+                logp = torch.log_softmax(masked_logits(term, mask), -1)
+                loss_ce = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
+                loss_pi = loss_pi + u.ce_weight * loss_ce
+                stats["loss_ce"] = loss_ce.item()
+        self.opt_actor.zero_grad(set_to_none=True)
+        loss_pi.backward()
+        self.opt_actor.step()
+        # (E) Polyak averaging of the targets (Eq. 36).
+        polyak_update(self.critic_target, self.critic, u.polyak)
+        return stats
+
+    def state_dict(self) -> dict:
+        return {
+            "policy": self.policy.state_dict(),
+            "critic": self.critic.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "opt_actor": self.opt_actor.state_dict(),
+            "opt_critic": self.opt_critic.state_dict(),
+        }
+
+    def load_state_dict(self, sd: dict) -> None:
+        self.policy.load_state_dict(sd["policy"])
+        self.critic.load_state_dict(sd["critic"])
+        self.critic_target.load_state_dict(sd["critic_target"])
+        self.opt_actor.load_state_dict(sd["opt_actor"])
+        self.opt_critic.load_state_dict(sd["opt_critic"])
+
+
+def save_policy(path: str, policy: Policy, extra: dict | None = None) -> None:
+    """A small inference checkpoint: {"config": {...}, "state_dict": ..., "meta": {...}}."""
+    torch.save(
+        {"config": asdict(policy.cfg), "state_dict": policy.state_dict(), "meta": extra or {}},
+        path,
+    )
+
+
+def load_policy(path: str) -> Policy:
+    ck = torch.load(path, map_location="cpu", weights_only=True)
+    pol = Policy(PolicyConfig(**ck["config"]))
+    pol.load_state_dict(ck["state_dict"])
+    pol.eval()
+    return pol
