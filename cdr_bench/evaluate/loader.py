@@ -47,43 +47,82 @@ def agent_name(path: str | os.PathLike[str]) -> str:
     return f.parent.name if f.name == "agent.py" else f.stem
 
 
+AGENT_FILE_SUFFIXES = (
+    ".py",
+    ".pt",
+    ".pth",
+    ".safetensors",
+    ".npz",
+    ".npy",
+    ".onnx",
+    ".ckpt",
+    ".bin",
+    ".pkl",
+    ".json",
+    ".yaml",
+    ".yml",
+    ".toml",
+    ".txt",
+)
+"""Files that can change what an agent does: code, weights and configuration. Documentation,
+logs, plots and result files in the agent's folder are not part of its identity, so writing an
+evaluation result inside the folder does not change the identity of the next run."""
+
+_SKIP_AGENT_DIRS = _SKIP_DIRS | {"eval", "results", "analysis", "runs"}
+
+CHECKPOINT_ENV = "CDR_BENCH_CHECKPOINT"
+"""Environment variable an agent may read to load another checkpoint (the Diffusion-AC agent
+scores its ablations this way); when set, the file it names is part of the identity."""
+
+
 def agent_files(path: str | os.PathLike[str]) -> list[Path]:
-    """Files that make up the agent: its folder (code and checkpoint) when the agent is a folder
-    or a file named ``agent.py``, else the single file."""
+    """Files that make up the agent: its folder's code, weights and configuration (see
+    :data:`AGENT_FILE_SUFFIXES`) when the agent is a folder or a file named ``agent.py``, else
+    the single file. Folders ``eval``, ``results``, ``analysis`` and ``runs`` are outputs."""
     f = resolve_agent_path(path)
     if f.name != "agent.py":
         return [f]
     out = []
     for root, dirs, names in os.walk(f.parent):
-        dirs[:] = sorted(d for d in dirs if d not in _SKIP_DIRS and not d.startswith("."))
+        dirs[:] = sorted(d for d in dirs if d not in _SKIP_AGENT_DIRS and not d.startswith("."))
         for n in sorted(names):
-            if not n.endswith((".pyc", ".pyo")) and not n.startswith("."):
+            if n.endswith(AGENT_FILE_SUFFIXES) and not n.startswith("."):
                 out.append(Path(root) / n)
     return sorted(out)
 
 
+def _sha256(p: Path) -> str:
+    h = hashlib.sha256()
+    with open(p, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
 def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Path, name and SHA-256 of every file of the agent (relative names), plus one combined
-    hash over them: identifies exactly what was scored."""
+    hash over them (and over the checkpoint named by ``CDR_BENCH_CHECKPOINT``, when set):
+    identifies exactly what was scored."""
     f = resolve_agent_path(path)
     base = f.parent
-    files = {}
-    for p in agent_files(path):
-        h = hashlib.sha256()
-        with open(p, "rb") as fh:
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                h.update(chunk)
-        files[p.relative_to(base).as_posix()] = h.hexdigest()
-    combined = hashlib.sha256(
-        "\n".join(f"{k} {v}" for k, v in sorted(files.items())).encode()
-    ).hexdigest()
-    return {
+    files = {p.relative_to(base).as_posix(): _sha256(p) for p in agent_files(path)}
+    lines = [f"{k} {v}" for k, v in sorted(files.items())]
+    identity: dict[str, Any] = {
         "name": agent_name(path),
         "path": os.path.relpath(f) if not os.path.relpath(f).startswith("..") else str(f),
         "entry": f.name,
         "files": files,
-        "sha256": combined,
     }
+    override = os.environ.get(CHECKPOINT_ENV)
+    if override:
+        ck = Path(override)
+        if not ck.is_file():
+            raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")
+        digest = _sha256(ck)
+        identity["checkpoint_override"] = {"path": override, "sha256": digest}
+        lines.append(f"{CHECKPOINT_ENV} {digest}")
+    identity["sha256"] = hashlib.sha256("\n".join(lines).encode()).hexdigest()
+    return identity
 
 
 def agent_error_line(exc: BaseException, agent_file: Path) -> str:
