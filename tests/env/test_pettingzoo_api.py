@@ -27,6 +27,7 @@ def _quiet():
 def test_every_kind_of_scenario_is_shipped():
     assert {"low", "medium", "high"} <= set(SCENARIOS)
     assert {f"curriculum/stage-{k:02d}" for k in range(1, 13)} <= set(SCENARIOS)
+    assert {f"tactical/{n}" for n in ("head-on", "crossing", "overtaking")} <= set(SCENARIOS)
     assert any(s.startswith("marl/") for s in SCENARIOS)
 
 
