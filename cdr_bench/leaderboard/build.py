@@ -1,0 +1,533 @@
+"""``cdr-bench leaderboard build [--evaluate [NAME ...]] [--check]``.
+
+* ``build``: render ``README.md``, ``index.html``, ``leaderboard.json`` and ``plots/*.png`` from
+  the submissions and the result files in ``results/`` (nothing is evaluated).
+* ``build --evaluate``: first run ``cdr-bench evaluate`` (and ``cdr-bench multimodal`` where a
+  submission asks) for every submission (or the named ones), each in its own sandboxed process
+  (:mod:`.sandbox`), then render.
+* ``build --check``: re-evaluate every submission into a scratch folder and compare with the
+  committed result files, then re-render from the committed results and compare with the
+  committed pages; exit code 1 and a readable diff if anything differs. Writes nothing.
+
+All-or-nothing: everything is produced in a scratch folder inside the leaderboard folder; only
+when every submission succeeded and every page rendered are the files moved into place (renames
+only). A failing submission leaves the leaderboard untouched.
+
+What ``--check`` compares: result files byte for byte (the per-episode JSONL) and field for
+field (the JSON), except ``timing`` (wall time, latency: machine-dependent), ``versions`` and
+``run_key`` (differences there are reported as notes); with ``--episodes`` below the committed
+count, the first episodes of each scenario (a multiple of the batch size, so each batch is run
+exactly as it was). Pages byte for byte; PNGs (and the images inside ``index.html``) only when
+this machine's matplotlib is the version that rendered them, otherwise their data is still
+compared through ``leaderboard.json`` and a note says so. Latency shown on the pages comes from
+the committed result files and is never re-measured by ``--check``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import os
+import re
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cdr_bench.cli import CLIError
+from cdr_bench.evaluate.loader import agent_files
+from cdr_bench.evaluate.results import atomic_write_text, read_result
+from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
+from cdr_bench.leaderboard.data import (
+    DEFAULT_REFERENCE,
+    build_data,
+    current_identity,
+    load_entries,
+    load_multimodal,
+    multimodal_path,
+    result_path,
+)
+from cdr_bench.leaderboard.published import load_published
+from cdr_bench.leaderboard.sandbox import (
+    Limits,
+    SandboxError,
+    network_isolation,
+    run_sandboxed,
+    scan_agent_code,
+)
+from cdr_bench.leaderboard.submission import Submission, load_submissions
+
+PAPER_EPISODES = 1000
+BASE_SEED = 0
+MULTIMODAL_SAMPLES = 1000
+PAGES = ("README.md", "index.html", "leaderboard.json")
+_MPL_META = re.compile(r'<meta name="generator" content="[^"]*; plots: matplotlib ([^"]+)">')
+_DATA_URI = re.compile(r'src="data:image/png;base64,[A-Za-z0-9+/=]+"')
+
+
+def log(msg: str) -> None:
+    print(f"cdr-bench leaderboard: {msg}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class Options:
+    leaderboard_dir: Path
+    evaluate: list[str] | None = None
+    """None: render only; []: every submission; names: those."""
+    check: bool = False
+    episodes: int | None = None
+    workers: int = 2
+    limits: Limits = field(default_factory=Limits)
+    reference: str = DEFAULT_REFERENCE
+
+
+# ----------------------------------------------------------------------------------------------
+# Rendering
+
+
+def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, bytes]:
+    """Every generated file (relative path -> bytes) from submissions and result files."""
+    from cdr_bench.leaderboard.plots import matplotlib_version, render_plots
+    from cdr_bench.leaderboard.render import render_html, render_markdown
+
+    published = load_published(lb_dir)
+    subs = load_submissions(lb_dir, published.names)
+    entries = load_entries(subs, results_dir)
+    data = build_data(entries, published, reference)
+    plots = render_plots(data)
+    files: dict[str, bytes] = {
+        "README.md": render_markdown(data, published, list(plots)).encode(),
+        "index.html": render_html(data, published, plots, matplotlib_version()).encode(),
+        "leaderboard.json": (json.dumps(data, indent=1, ensure_ascii=False) + "\n").encode(),
+    }
+    files.update({f"plots/{k}": v for k, v in plots.items()})
+    return files
+
+
+# ----------------------------------------------------------------------------------------------
+# Evaluation of one submission (sandboxed)
+
+
+def evaluate_submission(
+    sub: Submission,
+    root: Path,
+    out_dir: Path,
+    scratch: Path,
+    episodes: int,
+    workers: int,
+    limits: Limits,
+) -> float:
+    """Write ``out_dir/<name>.json|.jsonl`` (and multimodality files) for one submission;
+    returns the wall time. :class:`SandboxError` / :class:`CLIError` name the submission."""
+    what = f"submission {sub.name} ({sub.source})"
+    files = agent_files(root / sub.agent)
+    problems = scan_agent_code(files)
+    if problems:
+        raise SandboxError(
+            f"{what}: refused: the agent code loads pickle-family data, which can run arbitrary "
+            "code (use torch.load(weights_only=True), safetensors or numpy without pickle):\n  "
+            + "\n  ".join(problems)
+        )
+    env = {"CDR_BENCH_CHECKPOINT": sub.checkpoint} if sub.checkpoint else {}
+    py = sys.executable
+    wall = 0.0
+    if sub.checkpoint:
+        wall += run_sandboxed(
+            [py, "-m", "cdr_bench.leaderboard.safeload", sub.checkpoint],
+            what=f"{what}: checkpoint {sub.checkpoint}",
+            cwd=root,
+            scratch=scratch / "safeload",
+            limits=limits,
+        )
+    out = result_path(out_dir, sub.name)
+    argv = [py, "-m", "cdr_bench", "evaluate", sub.agent]
+    if sub.suite:
+        argv += ["--suite", sub.suite]
+    else:
+        for s in sub.scenarios:
+            argv += ["--scenario", s]
+    argv += [
+        "--episodes",
+        str(episodes),
+        "--seed",
+        str(BASE_SEED),
+        "--batch-size",
+        str(DEFAULT_BATCH_SIZE),
+        "--workers",
+        str(workers),
+        "--out",
+        str(out.resolve()),
+        "--no-progress",
+    ]
+    wall += run_sandboxed(
+        argv, what=what, cwd=root, scratch=scratch / "evaluate", limits=limits, env_extra=env
+    )
+    try:
+        result = read_result(out)
+    except ValueError as e:
+        raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
+    expected = current_identity(sub, root)["sha256"]
+    if result["agent"]["sha256"] != expected:
+        raise SandboxError(
+            f"{what}: the result names agent {result['agent']['sha256'][:12]}, the submission's "
+            f"files hash to {expected[:12]} (files changed during the run?)"
+        )
+    for sc in sub.multimodality:
+        mm_scratch = scratch / f"multimodal-{sc.replace('/', '_')}"
+        mm_out = mm_scratch / "out.json"
+        wall += run_sandboxed(
+            [
+                py,
+                "-m",
+                "cdr_bench",
+                "multimodal",
+                sub.agent,
+                "--scenario",
+                sc,
+                "--samples",
+                str(MULTIMODAL_SAMPLES),
+                "--seed",
+                str(BASE_SEED),
+                "--out",
+                str(mm_out.resolve()),
+            ],
+            what=f"{what}: multimodality on {sc}",
+            cwd=root,
+            scratch=mm_scratch,
+            limits=limits,
+            env_extra=env,
+        )
+        load_multimodal(mm_out)  # refuses garbage
+        shutil.copyfile(mm_out, multimodal_path(out_dir, sub.name, sc))
+    return wall
+
+
+def committed_episodes(results_dir: Path, subs: list[Submission]) -> int:
+    """The episode count per scenario of the committed results (one number for all)."""
+    counts = set()
+    for s in subs:
+        p = result_path(results_dir, s.name)
+        if p.exists():
+            try:
+                counts |= {sc["episodes"] for sc in read_result(p)["scenarios"]}
+            except ValueError:
+                continue
+    if len(counts) > 1:
+        raise CLIError(f"{results_dir}: results with different episode counts {sorted(counts)}")
+    return counts.pop() if counts else PAPER_EPISODES
+
+
+def _evaluate_all(
+    subs: list[Submission], opts: Options, root: Path, out_dir: Path, scratch: Path, n: int
+) -> None:
+    _, iso = network_isolation()
+    log(
+        f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {opts.workers} "
+        f"worker(s); limits: {opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per "
+        f"process, {opts.limits.wall_s:g} s wall; {iso}"
+    )
+    t0 = time.perf_counter()
+    for sub in subs:
+        wall = evaluate_submission(
+            sub, root, out_dir, scratch / sub.name, n, opts.workers, opts.limits
+        )
+        eps = n * len(sub.scenarios)
+        log(f"  {sub.name}: {eps} episodes in {wall:.1f} s ({eps / max(wall, 1e-9):.0f} ep/s)")
+    log(f"evaluation finished in {time.perf_counter() - t0:.1f} s")
+
+
+# ----------------------------------------------------------------------------------------------
+# Staging and commit
+
+
+@contextmanager
+def staging(lb_dir: Path) -> Iterator[Path]:
+    lb_dir.mkdir(parents=True, exist_ok=True)
+    d = Path(tempfile.mkdtemp(prefix=".build-", dir=lb_dir))
+    try:
+        yield d
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _swap_dir(new: Path, target: Path) -> None:
+    """Replace folder ``target`` by ``new`` with renames only."""
+    old = target.with_name(f".{target.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    if target.exists():
+        os.replace(target, old)
+    os.replace(new, target)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def commit(lb_dir: Path, stage: Path, files: dict[str, bytes], new_results: Path | None) -> None:
+    """Move everything produced in ``stage`` into ``lb_dir`` (renames only)."""
+    plots = stage / "plots-new"
+    plots.mkdir()
+    for rel, data in files.items():
+        if rel.startswith("plots/"):
+            (plots / rel.removeprefix("plots/")).write_bytes(data)
+    if new_results is not None:
+        _swap_dir(new_results, lb_dir / "results")
+    _swap_dir(plots, lb_dir / "plots")
+    for rel in PAGES:
+        atomic_write_text(lb_dir / rel, files[rel].decode())
+
+
+def _copy_results(src: Path, dst: Path, subs: list[Submission]) -> None:
+    dst.mkdir(parents=True, exist_ok=True)
+    for s in subs:
+        for p in sorted(src.glob(f"{s.name}.*")):
+            if p.name.startswith(f"{s.name}.") and not p.name.endswith(".partial.jsonl"):
+                shutil.copy2(p, dst / p.name)
+
+
+# ----------------------------------------------------------------------------------------------
+# Comparison (--check)
+
+
+def _diff_text(name: str, old: str, new: str, limit: int = 40) -> str:
+    lines = list(
+        difflib.unified_diff(
+            old.splitlines(), new.splitlines(), f"committed/{name}", f"now/{name}", lineterm="", n=1
+        )
+    )
+    if len(lines) > limit:
+        lines = lines[:limit] + [f"... ({len(lines) - limit} more diff lines)"]
+    return "\n".join(lines)
+
+
+def _identity_view(result: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in result.items() if k not in ("timing", "versions", "run_key")}
+
+
+def _episode_lines(path: Path, n: int) -> dict[tuple[str, int], str]:
+    out = {}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            if not line.strip():
+                continue
+            rec = json.loads(line)
+            if rec["episode"] < n:
+                out[(rec["scenario"], rec["episode"])] = line.rstrip("\n")
+    return out
+
+
+def compare_results(
+    sub: Submission, committed: Path, fresh: Path, n: int, notes: list[str]
+) -> list[str]:
+    """Differences between a submission's committed result and a fresh one (empty: equal)."""
+    old, new = read_result(committed), read_result(fresh)
+    name = f"results/{committed.name}"
+    diffs = []
+    if old["agent"]["sha256"] != new["agent"]["sha256"]:
+        changed = sorted(
+            k
+            for k in set(old["agent"]["files"]) | set(new["agent"]["files"])
+            if old["agent"]["files"].get(k) != new["agent"]["files"].get(k)
+        )
+        what = ", ".join(changed) or "checkpoint"
+        diffs.append(
+            f"{name}: the agent's files changed since it was evaluated ({what}); "
+            f"re-run `cdr-bench leaderboard build --evaluate {sub.name}`"
+        )
+    if old["versions"] != new["versions"]:
+        notes.append(f"{name}: evaluated with {old['versions']}, now {new['versions']}")
+    full = all(s["episodes"] == n for s in old["scenarios"])
+    if full:
+        a, b = _identity_view(old), _identity_view(new)
+        if a != b:
+            diffs.append(
+                _diff_text(
+                    name,
+                    json.dumps(a, indent=1, sort_keys=True),
+                    json.dumps(b, indent=1, sort_keys=True),
+                )
+            )
+    ea = _episode_lines(committed.with_suffix(".jsonl"), n)
+    eb = _episode_lines(fresh.with_suffix(".jsonl"), n)
+    bad = [
+        k for k in sorted(set(ea) | set(eb), key=lambda k: (k[0], k[1])) if ea.get(k) != eb.get(k)
+    ]
+    if bad:
+        lines = [f"{name.replace('.json', '.jsonl')}: {len(bad)} of {len(eb)} episodes differ"]
+        for k in bad[:3]:
+            lines.append(f"  {k[0]} episode {k[1]}:")
+            lines.append(f"    committed: {_short(ea.get(k))}")
+            lines.append(f"    now:       {_short(eb.get(k))}")
+        diffs.append("\n".join(lines))
+    return diffs
+
+
+def _short(line: str | None, width: int = 300) -> str:
+    if line is None:
+        return "(missing)"
+    return line if len(line) <= width else line[:width] + " ..."
+
+
+def compare_pages(lb_dir: Path, files: dict[str, bytes], notes: list[str]) -> list[str]:
+    diffs = []
+    html_path = lb_dir / "index.html"
+    committed_mpl = None
+    if html_path.exists():
+        m = _MPL_META.search(html_path.read_text(encoding="utf-8", errors="replace"))
+        committed_mpl = m.group(1) if m else None
+    now = _MPL_META.search(files["index.html"].decode())
+    now_mpl = now.group(1) if now else None
+    same_mpl = committed_mpl == now_mpl
+    if not same_mpl:
+        notes.append(
+            f"plots rendered with matplotlib {committed_mpl}, this machine has {now_mpl}: PNG "
+            "bytes not compared (their data is, in leaderboard.json)"
+        )
+    expected = set(files)
+    present = {"plots/" + p.name for p in (lb_dir / "plots").glob("*.png")} | {
+        p for p in PAGES if (lb_dir / p).exists()
+    }
+    for rel in sorted(expected - present):
+        diffs.append(f"{rel}: missing from the committed leaderboard")
+    for rel in sorted(present - expected):
+        diffs.append(f"{rel}: committed but no longer produced")
+    for rel in sorted(expected & present):
+        old = (lb_dir / rel).read_bytes()
+        new = files[rel]
+        if old == new:
+            continue
+        if rel.endswith(".png"):
+            if same_mpl:
+                diffs.append(f"{rel}: image differs ({len(old)} bytes committed, {len(new)} now)")
+            continue
+        old_t, new_t = old.decode("utf-8", errors="replace"), new.decode()
+        if rel == "index.html":
+            old_s = _MPL_META.sub("", _DATA_URI.sub('src="data:image/png..."', old_t))
+            new_s = _MPL_META.sub("", _DATA_URI.sub('src="data:image/png..."', new_t))
+            if old_s == new_s:
+                if same_mpl:
+                    diffs.append("index.html: an embedded plot differs")
+                continue
+            old_t, new_t = old_s, new_s
+        diffs.append(_diff_text(rel, old_t, new_t))
+    return diffs
+
+
+# ----------------------------------------------------------------------------------------------
+# Entry point
+
+
+def run(opts: Options) -> int:
+    lb_dir = opts.leaderboard_dir
+    root = lb_dir.resolve().parent
+    results_dir = lb_dir / "results"
+    published = load_published(lb_dir)
+    subs = load_submissions(lb_dir, published.names)
+    names = {s.name for s in subs}
+    if opts.reference not in names:
+        raise CLIError(f"reference entry {opts.reference!r} has no submission in {lb_dir}")
+    chosen = subs
+    if opts.evaluate:
+        unknown = sorted(set(opts.evaluate) - names)
+        if unknown:
+            raise CLIError(f"--evaluate: no submission named {', '.join(unknown)}")
+        chosen = [s for s in subs if s.name in opts.evaluate]
+    if opts.episodes is not None and opts.episodes < 1:
+        raise CLIError(f"--episodes must be >= 1, got {opts.episodes}")
+
+    if opts.check:
+        return _check(opts, lb_dir, root, results_dir, subs, chosen)
+
+    t0 = time.perf_counter()
+    with staging(lb_dir) as stage:
+        new_results = None
+        source = results_dir
+        if opts.evaluate is not None:
+            n = opts.episodes or (
+                PAPER_EPISODES if opts.evaluate == [] else committed_episodes(results_dir, subs)
+            )
+            new_results = stage / "results"
+            _copy_results(results_dir, new_results, [s for s in subs if s not in chosen])
+            _evaluate_all(chosen, opts, root, new_results, stage / "scratch", n)
+            source = new_results
+        elif opts.episodes is not None:
+            raise CLIError("--episodes needs --evaluate or --check (plain build only renders)")
+        files = render_all(lb_dir, source, opts.reference)
+        commit(lb_dir, stage, files, new_results)
+    log(
+        f"wrote {lb_dir}/README.md, index.html, leaderboard.json and "
+        f"{sum(k.startswith('plots/') for k in files)} plots in {time.perf_counter() - t0:.1f} s"
+    )
+    return 0
+
+
+def _check(
+    opts: Options,
+    lb_dir: Path,
+    root: Path,
+    results_dir: Path,
+    subs: list[Submission],
+    chosen: list[Submission],
+) -> int:
+    t0 = time.perf_counter()
+    committed_n = committed_episodes(results_dir, subs)
+    n = opts.episodes or committed_n
+    if n > committed_n:
+        raise CLIError(f"--episodes {n}: the committed results have only {committed_n}")
+    if n != committed_n and n % DEFAULT_BATCH_SIZE:
+        raise CLIError(
+            f"--episodes {n}: a partial check runs whole batches; use a multiple of "
+            f"{DEFAULT_BATCH_SIZE} (or {committed_n}, the committed count)"
+        )
+    diffs: list[str] = []
+    notes: list[str] = []
+    with staging(lb_dir) as stage:
+        fresh = stage / "results"
+        fresh.mkdir()
+        _evaluate_all(chosen, opts, root, fresh, stage / "scratch", n)
+        for sub in chosen:
+            committed = result_path(results_dir, sub.name)
+            if not committed.exists():
+                diffs.append(f"results/{committed.name}: missing from the committed leaderboard")
+                continue
+            diffs += compare_results(sub, committed, result_path(fresh, sub.name), n, notes)
+            for sc in sub.multimodality:
+                a_p, b_p = (
+                    multimodal_path(results_dir, sub.name, sc),
+                    multimodal_path(fresh, sub.name, sc),
+                )
+                a = load_multimodal(a_p) if a_p.exists() else None
+                b = load_multimodal(b_p)
+                if a != b:
+                    diffs.append(
+                        _diff_text(
+                            f"results/{a_p.name}",
+                            json.dumps(a, indent=1, sort_keys=True),
+                            json.dumps(b, indent=1, sort_keys=True),
+                        )
+                    )
+        try:
+            files = render_all(lb_dir, results_dir, opts.reference)
+        except CLIError as e:
+            diffs.append(f"the committed result files do not render: {e}")
+            files = None
+        if files is not None:
+            diffs += compare_pages(lb_dir, files, notes)
+    for note in notes:
+        log(f"note: {note}")
+    scope = "" if n == committed_n else f" (first {n} of {committed_n} episodes per scenario)"
+    if diffs:
+        print(
+            f"leaderboard check FAILED{scope}: the committed leaderboard differs from what the "
+            "code produces now (regenerate with `cdr-bench leaderboard build --evaluate`):\n",
+            file=sys.stderr,
+        )
+        print("\n\n".join(diffs), file=sys.stderr)
+        return 1
+    log(
+        f"check passed{scope}: {len(chosen)} submission(s) re-evaluated, pages identical "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
+    return 0

@@ -1,0 +1,271 @@
+"""Leaderboard submissions: ``leaderboard/submissions/<name>.yaml``, one file per entry.
+
+The schema lives here (:data:`FIELDS`); the YAML holds values only. Loading is strict: an
+unknown key, a missing required key, a wrong type or a path that does not exist is a
+:class:`SubmissionError` naming the file, the field and what was expected.
+
+Example (``leaderboard/submissions/mvp.yaml``)::
+
+    display_name: MVP (geometric resolver)
+    description: Modified Voltage Potential adapted to the 27 discrete actions
+    agent: agents/mvp/agent.py
+    checkpoint: null
+    authors: [cdr-bench contributors]
+    reference: agents/mvp/agent.py
+    training: null
+    scenarios: paper
+
+Paths (``agent``, ``checkpoint``, a ``reference`` that is not a URL) are relative to the
+repository root, i.e. the folder holding ``leaderboard/``, and must stay inside it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from cdr_bench.cli import CLIError
+
+NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
+CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
+"""Checkpoint formats that load without unpickling arbitrary objects (``torch.load`` with
+``weights_only=True``, safetensors, ``numpy.load`` with ``allow_pickle=False``)."""
+
+
+class SubmissionError(CLIError):
+    """A submission file is invalid; the message names the file, the field and what was
+    expected."""
+
+    def __init__(self, source: str | os.PathLike[str], field: str, message: str):
+        self.source = str(source)
+        self.field = field
+        super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+
+
+@dataclass(frozen=True)
+class Submission:
+    """One leaderboard entry, as validated from its YAML file."""
+
+    name: str
+    """File stem: the entry's id, the stem of its result files."""
+    source: Path
+    """The YAML file."""
+    display_name: str
+    description: str
+    agent: str
+    """Agent file or folder, relative to the repository root."""
+    checkpoint: str | None
+    """Checkpoint passed to the agent through ``CDR_BENCH_CHECKPOINT`` (relative path)."""
+    authors: tuple[str, ...]
+    reference: str
+    """Paper or code: an http(s) URL or a path in the repository."""
+    training: str | None
+    """The command that trained the checkpoint; ``None`` for scripted agents."""
+    scenarios: tuple[str, ...]
+    """Scenario registry names, in run order."""
+    suite: str | None
+    """The named suite when ``scenarios`` was given as one (``paper``)."""
+    published_as: str | None
+    """Row of the paper's Table 2 (agent) or Table 3 (variant) this entry reproduces."""
+    multimodality: tuple[str, ...]
+    """Scenarios for ``cdr-bench multimodal`` (first-action distributions)."""
+
+
+def _str(src: Path, field: str, v: Any, *, allow_none: bool = False) -> str | None:
+    if v is None and allow_none:
+        return None
+    if not isinstance(v, str) or not v.strip():
+        what = "a non-empty string" + (" or null" if allow_none else "")
+        raise SubmissionError(src, field, f"expected {what}, got {v!r}")
+    return v.strip()
+
+
+def _str_list(src: Path, field: str, v: Any, *, allow_empty: bool) -> tuple[str, ...]:
+    if not isinstance(v, list) or (not v and not allow_empty):
+        what = "a list of strings" if allow_empty else "a non-empty list of strings"
+        raise SubmissionError(src, field, f"expected {what}, got {v!r}")
+    out = []
+    for i, x in enumerate(v):
+        if not isinstance(x, str) or not x.strip():
+            raise SubmissionError(src, f"{field}[{i}]", f"expected a non-empty string, got {x!r}")
+        out.append(x.strip())
+    return tuple(out)
+
+
+def _repo_path(src: Path, field: str, value: str, root: Path) -> Path:
+    p = Path(value)
+    if p.is_absolute() or ".." in p.parts:
+        raise SubmissionError(
+            src, field, f"expected a path relative to the repository root {root}, got {value!r}"
+        )
+    full = root / p
+    if not full.exists():
+        raise SubmissionError(src, field, f"{value} does not exist (relative to {root})")
+    return full
+
+
+def _scenarios(src: Path, field: str, v: Any) -> tuple[tuple[str, ...], str | None]:
+    from cdr_bench.evaluate.api import SUITES
+    from cdr_bench.scenarios import list_scenarios
+
+    if isinstance(v, str):
+        if v not in SUITES:
+            raise SubmissionError(
+                src,
+                field,
+                f"expected a suite ({', '.join(SUITES)}) or a list of scenario names, got {v!r}",
+            )
+        return SUITES[v], v
+    names = _str_list(src, field, v, allow_empty=False)
+    known = set(list_scenarios())
+    for i, n in enumerate(names):
+        if n not in known:
+            raise SubmissionError(
+                src, f"{field}[{i}]", f"unknown scenario {n!r} (`cdr-bench scenarios list`)"
+            )
+    if len(set(names)) != len(names):
+        raise SubmissionError(src, field, f"a scenario is listed twice: {list(names)}")
+    return names, None
+
+
+FIELDS: dict[str, tuple[bool, str]] = {
+    "display_name": (False, "name shown in the tables (default: the file name)"),
+    "description": (False, "one line: what the agent is"),
+    "agent": (True, "agent .py file or folder holding agent.py, relative to the repository root"),
+    "checkpoint": (
+        False,
+        "checkpoint file (.pt, .pth, .safetensors, .npz) given to the agent through "
+        "CDR_BENCH_CHECKPOINT, or null",
+    ),
+    "authors": (True, "list of authors"),
+    "reference": (True, "paper or code: an http(s) URL or a path in the repository"),
+    "training": (True, "the command that trained the checkpoint; null for a scripted agent"),
+    "scenarios": (True, "'paper' (the paper suite) or a list of scenario registry names"),
+    "published_as": (
+        False,
+        "row of the paper's Table 2 (agent) or Table 3 (variant) shown beside this entry",
+    ),
+    "multimodality": (
+        False,
+        "scenarios on which `cdr-bench multimodal` maps the first-action distribution",
+    ),
+}
+"""Every key of a submission file: ``name -> (required, meaning)``."""
+
+
+def load_submission(
+    path: str | os.PathLike[str],
+    root: str | os.PathLike[str],
+    published_names: Callable[[], set[str]] | None = None,
+) -> Submission:
+    """Read and validate one submission file. ``root`` is the repository root; paths in the
+    file are relative to it. ``published_names`` returns the valid ``published_as`` values."""
+    src = Path(path)
+    root = Path(root)
+    name = src.stem
+    if src.suffix != ".yaml":
+        raise SubmissionError(src, "", "expected a .yaml file")
+    if not NAME_RE.match(name):
+        raise SubmissionError(
+            src, "", "file name must be lower-case letters, digits and dashes (it is the entry id)"
+        )
+    try:
+        data = yaml.safe_load(src.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise SubmissionError(src, "", f"cannot be read ({e.strerror})") from None
+    except yaml.YAMLError as e:
+        raise SubmissionError(src, "", f"not valid YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise SubmissionError(src, "", f"expected a mapping of fields, got {type(data).__name__}")
+    for key in data:
+        if key not in FIELDS:
+            raise SubmissionError(src, str(key), f"unknown field (known: {', '.join(FIELDS)})")
+    for key, (required, _) in FIELDS.items():
+        if required and key not in data:
+            raise SubmissionError(src, key, "missing required field")
+
+    agent = _str(src, "agent", data["agent"])
+    assert agent is not None
+    agent_full = _repo_path(src, "agent", agent, root)
+    if agent_full.is_dir() and not (agent_full / "agent.py").is_file():
+        raise SubmissionError(src, "agent", f"folder {agent} has no agent.py")
+    if agent_full.is_file() and agent_full.suffix != ".py":
+        raise SubmissionError(src, "agent", f"expected a .py file or a folder, got {agent}")
+
+    checkpoint = _str(src, "checkpoint", data.get("checkpoint"), allow_none=True)
+    if checkpoint is not None:
+        ck = _repo_path(src, "checkpoint", checkpoint, root)
+        if not ck.is_file() or ck.suffix not in CHECKPOINT_SUFFIXES:
+            raise SubmissionError(
+                src,
+                "checkpoint",
+                f"expected a file ending in {', '.join(CHECKPOINT_SUFFIXES)} (formats that load "
+                f"without unpickling), got {checkpoint}",
+            )
+
+    reference = _str(src, "reference", data["reference"])
+    assert reference is not None
+    if not reference.startswith(("https://", "http://")):
+        _repo_path(src, "reference", reference, root)
+
+    training = _str(src, "training", data["training"], allow_none=True)
+    if checkpoint is not None and training is None:
+        raise SubmissionError(
+            src, "training", "a submission with a checkpoint must give the command that trained it"
+        )
+
+    scenarios, suite = _scenarios(src, "scenarios", data["scenarios"])
+    multimodality = _str_list(src, "multimodality", data.get("multimodality", []), allow_empty=True)
+    for i, s in enumerate(multimodality):
+        if s not in scenarios:
+            raise SubmissionError(
+                src, f"multimodality[{i}]", f"{s!r} is not one of this entry's scenarios"
+            )
+
+    published_as = _str(src, "published_as", data.get("published_as"), allow_none=True)
+    if published_as is not None and published_names is not None:
+        valid = published_names()
+        if published_as not in valid:
+            raise SubmissionError(
+                src,
+                "published_as",
+                f"unknown row {published_as!r} (Table 2/3 rows: {', '.join(sorted(valid))})",
+            )
+
+    return Submission(
+        name=name,
+        source=src,
+        display_name=_str(src, "display_name", data.get("display_name", name)) or name,
+        description=_str(src, "description", data.get("description", "-")) or "-",
+        agent=agent,
+        checkpoint=checkpoint,
+        authors=_str_list(src, "authors", data["authors"], allow_empty=False),
+        reference=reference,
+        training=training,
+        scenarios=scenarios,
+        suite=suite,
+        published_as=published_as,
+        multimodality=multimodality,
+    )
+
+
+def load_submissions(
+    leaderboard_dir: str | os.PathLike[str],
+    published_names: Callable[[], set[str]] | None = None,
+) -> list[Submission]:
+    """Every ``submissions/*.yaml`` of a leaderboard folder, sorted by name."""
+    d = Path(leaderboard_dir)
+    sub = d / "submissions"
+    files = sorted(sub.glob("*.yaml")) if sub.is_dir() else []
+    if not files:
+        raise CLIError(f"{sub}: no submission files (*.yaml)")
+    others = sorted(p.name for p in sub.iterdir() if p.suffix in (".yml", ".json"))
+    if others:
+        raise CLIError(f"{sub}: submissions are .yaml files; rename {', '.join(others)}")
+    return [load_submission(f, d.resolve().parent, published_names) for f in files]

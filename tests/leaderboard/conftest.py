@@ -1,0 +1,116 @@
+"""A miniature repository with a leaderboard: two agents (``direct`` and a ``weave`` agent that
+turns toward its goal while alternating climbs and descents), their submissions, the published
+tables, and result files written once per session by the real ``build --evaluate`` (sandboxed
+subprocesses, 8 episodes per scenario)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+EPISODES = 8
+
+WEAVE_AGENT = textwrap.dedent(
+    """
+    import numpy as np
+
+    class Agent:
+        def __init__(self, observation_space, action_space):
+            self.t = 0
+
+        def reset(self, seed):
+            self.t = 0
+
+        def act(self, observation):
+            return int(self.act_batch(observation["observation"][None],
+                                      observation["action_mask"][None])[0])
+
+        def act_batch(self, observations, masks):
+            self.t += 1
+            rel = np.degrees(np.arctan2(observations[:, 9], observations[:, 10]))
+            psi = np.where(rel > 2.5, 1, np.where(rel < -2.5, -1, 0))
+            h = 1 if (self.t // 4) % 2 else -1
+            a = 9 * (psi + 1) + 3 + (h + 1)
+            return np.where(masks[np.arange(len(a)), a] == 1, a, 9 * (psi + 1) + 4)
+    """
+)
+
+
+def submission_yaml(agent: str, **extra: str) -> str:
+    lines = [
+        f"agent: {agent}",
+        "authors: [test]",
+        "reference: https://example.org/paper",
+        "training: null",
+        "scenarios: [low, medium, tactical/head-on]",
+    ]
+    lines += [f"{k}: {v}" for k, v in extra.items()]
+    return "\n".join(lines) + "\n"
+
+
+def cdr(*args: object, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cdr_bench", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+    )
+
+
+def make_repo(root: Path) -> Path:
+    """Agents, submissions and published tables (no results yet); returns the leaderboard dir."""
+    (root / "agents" / "direct").mkdir(parents=True)
+    shutil.copy(ROOT / "agents" / "direct" / "agent.py", root / "agents" / "direct" / "agent.py")
+    (root / "agents" / "weave").mkdir()
+    (root / "agents" / "weave" / "agent.py").write_text(WEAVE_AGENT)
+    lb = root / "leaderboard"
+    (lb / "submissions").mkdir(parents=True)
+    shutil.copytree(ROOT / "leaderboard" / "published", lb / "published")
+    (lb / "submissions" / "direct.yaml").write_text(
+        submission_yaml("agents/direct/agent.py", display_name="Direct")
+    )
+    (lb / "submissions" / "weave.yaml").write_text(
+        submission_yaml("agents/weave", display_name="Weave", published_as="PPO")
+    )
+    return lb
+
+
+@pytest.fixture(scope="session")
+def evaluated_repo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The miniature repository after ``build --evaluate`` (do not modify: copy it)."""
+    root = tmp_path_factory.mktemp("lb-repo")
+    make_repo(root)
+    r = cdr(
+        "leaderboard",
+        "build",
+        "--evaluate",
+        "--episodes",
+        EPISODES,
+        "--reference",
+        "weave",
+        "--workers",
+        1,
+        cwd=root,
+    )
+    assert r.returncode == 0, r.stderr
+    return root
+
+
+@pytest.fixture
+def repo(evaluated_repo: Path, tmp_path: Path) -> Path:
+    """A private copy of the evaluated miniature repository."""
+    dst = tmp_path / "repo"
+    shutil.copytree(evaluated_repo, dst)
+    return dst
+
+
+def snapshot(lb: Path) -> dict[str, bytes]:
+    """Every file under the leaderboard folder, by relative path."""
+    return {str(p.relative_to(lb)): p.read_bytes() for p in sorted(lb.rglob("*")) if p.is_file()}

@@ -1,0 +1,239 @@
+"""``cdr-bench leaderboard build`` from result files, ``--check`` on untampered and tampered
+leaderboards, and the all-or-nothing behaviour with misbehaving submissions."""
+
+from __future__ import annotations
+
+import json
+import re
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from tests.leaderboard.conftest import EPISODES, cdr, snapshot, submission_yaml
+
+
+def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
+    lb = repo / "leaderboard"
+    before = snapshot(lb)
+    for name in ("README.md", "index.html", "leaderboard.json"):
+        (lb / name).unlink()
+    r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
+    assert r.returncode == 0, r.stderr
+    after = snapshot(lb)
+    assert after == before  # same bytes as the build that evaluated: a function of the results
+
+    readme = (lb / "README.md").read_text()
+    for sid in ("low", "medium", "tactical/head-on"):
+        assert f"### {sid}" in readme
+    data = json.loads((lb / "leaderboard.json").read_text())
+    low = next(t for t in data["tables"] if t["scenario"] == "low")
+    assert {r["entry"] for r in low["rows"]} == {"direct", "weave"}
+    assert all(r["episodes"] == EPISODES for r in low["rows"])
+    # the paired comparison with the reference comes from the evaluator's compare()
+    direct = next(r for r in low["rows"] if r["entry"] == "direct")
+    assert direct["vs_reference"]["success_rate"]["significant"] in (True, False)
+    assert next(r for r in low["rows"] if r["entry"] == "weave")["vs_reference"]["los_rate"] == (
+        "reference"
+    )
+    assert "Weave (reference)" in readme
+    # ranks follow the success rate
+    ranked = sorted(low["rows"], key=lambda r: r["rank"])
+    s = [r["metrics"]["success_rate"]["value"] for r in ranked]
+    assert s == sorted(s, reverse=True)
+    # the best value of a column is marked, in bold, on the row that holds it
+    for key in ("success_rate", "los_rate"):
+        for name in low["best"][key]:
+            row = next(r for r in low["rows"] if r["entry"] == name)
+            v = row["metrics"][key]["value"]
+            assert all(
+                (o["metrics"][key]["value"] <= v)
+                if key == "success_rate"
+                else (o["metrics"][key]["value"] >= v)
+                for o in low["rows"]
+            )
+    assert "**" in readme
+
+    # published numbers in their own section, and beside the entry that names them
+    measured, published = readme.split("## Published numbers", 1)
+    assert "| PPO | low | 100 |" in published and "PPO" not in measured.split("## Entries")[0]
+    assert "Weave — published as “PPO” (Table 2)" in published
+    plots = {p.name for p in (lb / "plots").glob("*.png")}
+    assert {"success_rate.png", "success_vs_density.png", "latency.png"} <= plots
+    for p in plots:
+        assert f"plots/{p}" in readme
+    html = (lb / "index.html").read_text()
+    assert html.count("data:image/png;base64,") == len(plots)
+    assert not re.search(r'(src|href)="(https?:)?//', html), "external asset in index.html"
+
+
+def test_check_passes_untampered_and_fails_tampered(repo: Path) -> None:
+    r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
+    assert r.returncode == 0, r.stderr
+    assert "check passed" in r.stderr
+
+    lb = repo / "leaderboard"
+    readme = (lb / "README.md").read_text()
+    m = re.search(r"\| 1 \| [^|]+ \| (?:\*\*)?(\d+\.\d)%", readme)
+    assert m
+    tampered = readme.replace(m.group(0), m.group(0).replace(m.group(1), "99.9"), 1)
+    assert tampered != readme
+    (lb / "README.md").write_text(tampered)
+    r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
+    assert r.returncode == 1
+    assert "check FAILED" in r.stderr
+    assert "--- committed/README.md" in r.stderr and "+++ now/README.md" in r.stderr
+    assert "99.9%" in r.stderr
+
+
+def test_check_fails_on_tampered_result_file(repo: Path) -> None:
+    lb = repo / "leaderboard"
+    path = lb / "results" / "direct.json"
+    res = json.loads(path.read_text())
+    m = res["scenarios"][0]["metrics"]["ownship"]["success_rate"]
+    m["value"] = 1.0 if m["value"] != 1.0 else 0.0
+    path.write_text(json.dumps(res, indent=1) + "\n")
+    r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
+    assert r.returncode == 1
+    assert "results/direct.json" in r.stderr
+    assert "do not match the per-episode file" in r.stderr
+    # plain build refuses it too, and writes nothing
+    before = snapshot(lb)
+    r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
+    assert r.returncode == 2 and "direct.json" in r.stderr
+    assert snapshot(lb) == before
+
+
+BAD_AGENTS = {
+    "crash": (
+        "class Agent:\n"
+        "    def __init__(self, o, a): pass\n"
+        "    def act(self, obs):\n"
+        "        raise RuntimeError('boom at step')\n",
+        [],
+        "boom at step",
+    ),
+    "garbage": (
+        "import sys\n"
+        "sys.stdout.write('\\x1b[2J\\x00\\x07' * 200)\n"
+        "class Agent:\n"
+        "    def __init__(self, o, a): pass\n"
+        "    def act(self, obs):\n"
+        "        print('\\x1b[31mGARBAGE\\x00')\n"
+        "        return 'left please'\n",
+        [],
+        "invalid action",
+    ),
+    "hang": (
+        "import time\ntime.sleep(600)\nclass Agent:\n    pass\n",
+        ["--timeout", "4"],
+        "wall-clock limit of 4 s",
+    ),
+    "spin": (
+        "while True:\n    pass\n",
+        ["--cpu-limit", "2"],
+        "CPU time limit is 2 s",
+    ),
+    "hog": (
+        "blob = bytearray(8 * 1024 ** 3)\nclass Agent:\n    pass\n",
+        ["--memory-limit", "2048"],
+        "MemoryError",
+    ),
+    "pickle": (
+        "import pickle\n"
+        "class Agent:\n"
+        "    def __init__(self, o, a): self.p = pickle.loads(b'')\n"
+        "    def act(self, obs): return 13\n",
+        [],
+        "pickle-family",
+    ),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_AGENTS))
+def test_misbehaving_submission_leaves_leaderboard_untouched(repo: Path, kind: str) -> None:
+    code, flags, expected = BAD_AGENTS[kind]
+    (repo / "agents" / "bad").mkdir()
+    (repo / "agents" / "bad" / "agent.py").write_text(code)
+    lb = repo / "leaderboard"
+    (lb / "submissions" / "bad.yaml").write_text(submission_yaml("agents/bad"))
+    before = {k: v for k, v in snapshot(lb).items() if k != "submissions/bad.yaml"}
+    r = cdr(
+        "leaderboard",
+        "build",
+        "--evaluate",
+        "--episodes",
+        EPISODES,
+        "--reference",
+        "weave",
+        "--workers",
+        1,
+        *flags,
+        cwd=repo,
+        timeout=120,
+    )
+    assert r.returncode == 2, r.stderr
+    err = r.stderr
+    assert "submission bad" in err and expected in err, err
+    assert "Traceback" not in err.split("last output")[0]
+    assert "\x1b" not in err and "\x00" not in err  # the child's garbage is not echoed raw
+    after = {k: v for k, v in snapshot(lb).items() if k != "submissions/bad.yaml"}
+    assert after == before
+    assert not list(lb.glob(".build-*")), "scratch folder left behind"
+
+
+def test_adding_a_submission_is_one_yaml_file(repo: Path) -> None:
+    lb = repo / "leaderboard"
+    (lb / "submissions" / "direct-again.yaml").write_text(
+        submission_yaml("agents/direct/agent.py", display_name="Direct again")
+    )
+    r = cdr(
+        "leaderboard",
+        "build",
+        "--evaluate",
+        "direct-again",
+        "--reference",
+        "weave",
+        "--workers",
+        1,
+        cwd=repo,
+    )
+    assert r.returncode == 0, r.stderr
+    assert (lb / "results" / "direct-again.jsonl").read_bytes() == (
+        lb / "results" / "direct.jsonl"
+    ).read_bytes()  # same agent, same episodes (the count is taken from the committed results)
+    assert "Direct again" in (lb / "README.md").read_text()
+
+
+def test_build_refuses_results_on_other_episodes(repo: Path) -> None:
+    lb = repo / "leaderboard"
+    r = cdr(
+        "evaluate",
+        "agents/direct/agent.py",
+        "--scenario",
+        "low",
+        "--scenario",
+        "medium",
+        "--scenario",
+        "tactical/head-on",
+        "--episodes",
+        EPISODES,
+        "--seed",
+        "7",
+        "--out",
+        "leaderboard/results/direct.json",
+        "--no-progress",
+        cwd=repo,
+    )
+    assert r.returncode == 0, r.stderr
+    before = snapshot(lb)
+    r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
+    assert r.returncode == 2
+    assert "not run on the same episodes" in r.stderr
+    assert snapshot(lb) == before
+
+
+def test_partial_check_needs_whole_batches(repo: Path) -> None:
+    r = cdr("leaderboard", "build", "--check", "--episodes", "3", "--reference", "weave", cwd=repo)
+    assert r.returncode == 2
+    assert "--episodes" in r.stderr and textwrap.shorten(r.stderr, 400)

@@ -1,0 +1,170 @@
+"""Strict validation of submission files, the published tables, and the guards against
+unpickling (static scan of agent code, safe checkpoint loading)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cdr_bench.leaderboard.published import load_published
+from cdr_bench.leaderboard.sandbox import scan_agent_code
+from cdr_bench.leaderboard.submission import SubmissionError, load_submission, load_submissions
+from tests.leaderboard.conftest import ROOT, cdr, make_repo, submission_yaml
+
+GOOD = submission_yaml("agents/direct/agent.py")
+
+
+@pytest.fixture
+def lb(tmp_path: Path) -> Path:
+    return make_repo(tmp_path)
+
+
+def write(lb: Path, text: str, name: str = "entry") -> Path:
+    p = lb / "submissions" / f"{name}.yaml"
+    p.write_text(text)
+    return p
+
+
+def test_good_submission(lb: Path) -> None:
+    s = load_submission(write(lb, GOOD), lb.parent)
+    assert s.name == "entry" and s.agent == "agents/direct/agent.py"
+    assert s.scenarios == ("low", "medium", "tactical/head-on") and s.suite is None
+    assert s.authors == ("test",) and s.training is None and s.checkpoint is None
+
+
+def test_repository_submissions_are_valid() -> None:
+    subs = load_submissions(ROOT / "leaderboard", load_published(ROOT / "leaderboard").names)
+    names = {s.name for s in subs}
+    assert {"direct", "random", "mvp", "diffusion-ac"} <= names
+    for s in subs:
+        assert s.suite == "paper"
+
+
+BAD = {
+    "unknown key": (GOOD + "colour: blue\n", "colour", "unknown field"),
+    "missing key": (GOOD.replace("authors: [test]\n", ""), "authors", "missing required"),
+    "authors type": (GOOD.replace("authors: [test]", "authors: test"), "authors", "list"),
+    "author item": (GOOD.replace("authors: [test]", "authors: [3]"), "authors[0]", "string"),
+    "agent missing": (
+        GOOD.replace("agents/direct/agent.py", "agents/nope.py"),
+        "agent",
+        "does not exist",
+    ),
+    "agent absolute": (
+        GOOD.replace("agents/direct/agent.py", "/etc/passwd"),
+        "agent",
+        "relative to the repository root",
+    ),
+    "agent escapes": (
+        GOOD.replace("agents/direct/agent.py", "../agents/direct/agent.py"),
+        "agent",
+        "relative to the repository root",
+    ),
+    "pickle checkpoint": (
+        GOOD.replace("training: null", "training: python train.py")
+        + "checkpoint: agents/direct/model.pkl\n",
+        "checkpoint",
+        "without unpickling",
+    ),
+    "checkpoint without training": (
+        GOOD + "checkpoint: agents/direct/model.pt\n",
+        "training",
+        "command that trained",
+    ),
+    "unknown scenario": (
+        GOOD.replace("tactical/head-on", "tactical/nope"),
+        "scenarios[2]",
+        "unknown",
+    ),
+    "unknown suite": (
+        GOOD.replace("[low, medium, tactical/head-on]", "atari"),
+        "scenarios",
+        "suite",
+    ),
+    "training type": (GOOD.replace("training: null", "training: [a, b]"), "training", "string"),
+    "published row": (GOOD + "published_as: GPT-5\n", "published_as", "unknown row"),
+    "multimodality elsewhere": (
+        GOOD + "multimodality: [tactical/crossing]\n",
+        "multimodality[0]",
+        "not one of this entry's scenarios",
+    ),
+    "not a mapping": ("- agent: x\n", "", "expected a mapping"),
+    "bad yaml": ("agent: [unclosed\n", "", "not valid YAML"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_submission_names_file_and_field(lb: Path, case: str) -> None:
+    text, field, what = BAD[case]
+    (lb.parent / "agents" / "direct" / "model.pkl").write_bytes(b"x")
+    (lb.parent / "agents" / "direct" / "model.pt").write_bytes(b"x")
+    p = write(lb, text)
+    with pytest.raises(SubmissionError) as e:
+        load_submission(p, lb.parent, load_published(lb).names)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}: {field}: " if field else f"{p}: "), msg
+    assert what in msg
+    assert e.value.field == field
+
+
+def test_bad_file_name(lb: Path) -> None:
+    p = write(lb, GOOD, name="My Agent")
+    with pytest.raises(SubmissionError, match="lower-case"):
+        load_submission(p, lb.parent)
+
+
+def test_cli_reports_bad_submission_in_one_line(lb: Path) -> None:
+    write(lb, GOOD + "colour: blue\n")
+    r = cdr("leaderboard", "build", cwd=lb.parent)
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0
+    assert "entry.yaml: colour: unknown field" in r.stderr
+
+
+def test_published_tables_loaded_verbatim() -> None:
+    pub = load_published(ROOT / "leaderboard")
+    t2 = pub.table("Table 2")
+    assert len(t2) == 15 and len(pub.table("Table 3")) == 5
+    dac = pub.lookup("Diffusion-AC", "high")
+    assert dac is not None and dac.values["success_rate"] == 94.1
+    assert dac.values["average_safety_reward"] == -1.98
+    assert "Diffusion-AC" in pub.names() and "W/O DPSC" in pub.names()
+
+
+def test_scan_flags_pickle_family_loaders(tmp_path: Path) -> None:
+    f = tmp_path / "agent.py"
+    f.write_text(
+        "import torch, numpy as np\n"
+        "import dill\n"
+        "from joblib import load\n"
+        "a = torch.load('x.pt', weights_only=False)\n"
+        "b = np.load('x.npy', allow_pickle=True)\n"
+        "c = torch.load('x.pt', weights_only=True)\n"
+        "d = np.load('x.npz')\n"
+    )
+    problems = scan_agent_code([f])
+    assert len(problems) == 4, problems
+    assert any("weights_only=False" in p for p in problems)
+    assert any("allow_pickle=True" in p for p in problems)
+    assert scan_agent_code([ROOT / "agents" / "diffusion_ac" / "agent.py"]) == []
+
+
+def test_safeload_refuses_pickled_objects(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    good, evil = tmp_path / "good.pt", tmp_path / "evil.pt"
+    torch.save({"w": torch.zeros(3)}, good)
+
+    class Evil:
+        def __reduce__(self):  # runs at unpickling time
+            return (print, ("PWNED",))
+
+    torch.save({"w": Evil()}, evil)
+    run = [sys.executable, "-m", "cdr_bench.leaderboard.safeload"]
+    r = subprocess.run([*run, str(good)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([*run, str(evil)], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "PWNED" not in r.stdout and "not loadable without unpickling" in r.stderr
