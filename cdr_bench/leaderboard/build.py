@@ -222,9 +222,40 @@ def committed_episodes(results_dir: Path, subs: list[Submission]) -> int:
     return counts.pop() if counts else PAPER_EPISODES
 
 
+def untracked_agent_files(sub: Submission, root: Path) -> list[str]:
+    """Files in the agent's identity that git does not track (a clean clone lacks them, so
+    its ``--check`` would see other agent files); empty outside a git work tree."""
+    import subprocess
+
+    files = [p.resolve() for p in agent_files(root / sub.agent)]
+    if sub.checkpoint:
+        files.append((root / sub.checkpoint).resolve())
+    try:
+        r = subprocess.run(
+            ["git", "ls-files", "--others", "--exclude-standard", "-z", "--", sub.agent],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return []
+    if r.returncode != 0:
+        return []
+    untracked = {(root / p).resolve() for p in r.stdout.split("\0") if p}
+    return sorted(str(f.relative_to(root.resolve())) for f in files if f in untracked)
+
+
 def _evaluate_all(
     subs: list[Submission], opts: Options, root: Path, out_dir: Path, scratch: Path, n: int
 ) -> None:
+    for sub in subs:
+        loose = untracked_agent_files(sub, root)
+        if loose:
+            log(
+                f"warning: {sub.name}: files not tracked by git are part of the agent's identity "
+                f"({', '.join(loose)}); commit them, or `--check` on a clean clone will fail"
+            )
     _, iso = network_isolation()
     log(
         f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {opts.workers} "

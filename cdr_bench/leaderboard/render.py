@@ -21,7 +21,7 @@ GENERATOR = "cdr-bench leaderboard build"
 
 INTRO = (
     "Every entry is a file in `submissions/`, scored by `cdr-bench evaluate` on identical "
-    "episodes (episode *i* of a scenario has the same seed and traffic for every entry) in its "
+    "episodes (episode i of a scenario has the same seed and traffic for every entry) in its "
     "own sandboxed process; the result files are in `results/`. Rates are per episode with 95 % "
     "Wilson intervals, means (steps of successful episodes, episode sums of the goal and safety "
     "rewards R_G / R_S) with 95 % bootstrap intervals. **Bold**: the best value of the column "
@@ -268,6 +268,7 @@ td.best{font-weight:700;background:#dafbe1}
 img{max-width:100%;border:1px solid #d0d7de;margin:.4rem 0}
 code{background:#f6f8fa;padding:0 .2rem}
 nav a{margin-right:1rem}
+.scroll{overflow-x:auto}
 """
 
 _JS = """
@@ -314,7 +315,10 @@ def _inline_md(s: str) -> str:
 
 
 def html_table(tid: str, head: list[str], rows: list[list[Cell]], cls: str = "") -> str:
-    out = [f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">']
+    out = [
+        '<div class="scroll">',
+        f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">',
+    ]
     out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in head) + "</tr></thead>")
     out.append("<tbody>")
     for r in rows:
@@ -328,7 +332,7 @@ def html_table(tid: str, head: list[str], rows: list[list[Cell]], cls: str = "")
             mark = f'<span class="mark">{c.mark}</span>' if c.mark else ""
             tds.append(f"<td{attrs}>{_inline_md(c.text)}{mark}</td>")
         out.append("<tr>" + "".join(tds) + "</tr>")
-    out.append("</tbody></table>")
+    out.append("</tbody></table></div>")
     return "\n".join(out)
 
 
