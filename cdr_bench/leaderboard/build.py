@@ -357,12 +357,17 @@ def compare_results(
     name = f"results/{committed.name}"
     diffs = []
     if old["agent"]["sha256"] != new["agent"]["sha256"]:
-        changed = sorted(
-            k
-            for k in set(old["agent"]["files"]) | set(new["agent"]["files"])
-            if old["agent"]["files"].get(k) != new["agent"]["files"].get(k)
-        )
-        what = ", ".join(changed) or "checkpoint"
+        fa, fb = old["agent"]["files"], new["agent"]["files"]
+        parts = [
+            f"{label}: {', '.join(names)}"
+            for label, names in (
+                ("missing here", sorted(set(fa) - set(fb))),
+                ("new", sorted(set(fb) - set(fa))),
+                ("changed", sorted(k for k in set(fa) & set(fb) if fa[k] != fb[k])),
+            )
+            if names
+        ]
+        what = "; ".join(parts) or "the checkpoint"
         diffs.append(
             f"{name}: the agent's files changed since it was evaluated ({what}); "
             f"re-run `cdr-bench leaderboard build --evaluate {sub.name}`"

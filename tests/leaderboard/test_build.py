@@ -237,3 +237,24 @@ def test_partial_check_needs_whole_batches(repo: Path) -> None:
     r = cdr("leaderboard", "build", "--check", "--episodes", "3", "--reference", "weave", cwd=repo)
     assert r.returncode == 2
     assert "--episodes" in r.stderr and textwrap.shorten(r.stderr, 400)
+
+
+def test_check_names_agent_files_changed_since_evaluation(repo: Path) -> None:
+    agent = repo / "agents" / "direct" / "agent.py"
+    agent.write_text(agent.read_text() + "\n# retrained\n")
+    r = cdr(
+        "leaderboard",
+        "build",
+        "--check",
+        "--evaluate",
+        "direct",
+        "--reference",
+        "weave",
+        "--workers",
+        1,
+        cwd=repo,
+    )
+    assert r.returncode == 1
+    assert "results/direct.json: the agent's files changed" in r.stderr
+    assert "changed: agent.py" in r.stderr
+    assert "--evaluate direct" in r.stderr
