@@ -17,6 +17,11 @@ import numpy as np
 
 TRAINERS: dict[str, str] = {
     "diffusion-ac": "cdr_bench.rl.train_diffusion_ac",
+    "ppo": "cdr_bench.rl.train_ppo",
+    "maskable-ppo": "cdr_bench.rl.train_maskable_ppo",
+    "td3": "cdr_bench.rl.train_td3",
+    "rainbow": "cdr_bench.rl.train_rainbow",
+    "safe-dqn-x": "cdr_bench.rl.train_safe_dqn",
 }
 """``cdr-bench train NAME``: trainer modules. Each exposes ``add_arguments(parser)`` (its flags)
 and ``run(namespace) -> dict`` (train, write the run directory, return a JSON summary)."""

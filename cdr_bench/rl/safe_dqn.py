@@ -1,0 +1,150 @@
+"""Safe-DQN-X: separate Q networks for the safety reward and the goal reward (paper §5.2, ref. [9]).
+
+The paper's reference [9] (Wang et al., "Enhancing Air Traffic Control: A Transparent Deep
+Reinforcement Learning Framework for Autonomous Conflict Resolution", Expert Systems with
+Applications 260, 2025) "separates the intertwined Q-value learning model into distinct modules
+for safety-awareness and efficiency (target attainment)" (its abstract). Neither that abstract
+nor the Diffusion-AC paper states how the two modules are combined into one action, so cdr-bench
+offers two documented rules (:func:`combine`), chosen with ``--combine``:
+
+* ``sum`` (default) -- reward decomposition: the step reward is R = R_G + R_S, so under one
+  policy Q = Q_G + Q_S; act greedily on the sum, and bootstrap *both* components with the action
+  the sum picks in the next state. This is Q-decomposition (Russell & Zimdars, ICML 2003) in the
+  off-policy form drQ of Juozapaitis et al. ("Explainable Reinforcement Learning via Reward
+  Decomposition", IJCAI-19 XAI workshop, 2019), eq. for a' = argmax_a sum_c Q_c(s', a).
+* ``lexicographic`` -- safety first: the safe set is the feasible actions whose Q_S is within
+  ``slack`` of the best feasible Q_S; among them pick the largest Q_G. Thresholded lexicographic
+  Q-learning (Gabor, Kalmar & Szepesvari, ICML 1998; Skalse et al., "Lexicographic Multi-Objective
+  Reinforcement Learning", IJCAI 2022). Both components again bootstrap with that action.
+
+Masks: every rule chooses among the feasible actions only, in acting and in the targets.
+Targets are double-Q style: the online networks choose the next action with the rule, the
+target networks score it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from cdr_bench.rl.networks import N_ACTIONS, frozen_copy, mlp, polyak_update
+
+RULES = ("sum", "lexicographic")
+
+
+def combine(
+    q_safety: torch.Tensor,
+    q_goal: torch.Tensor,
+    mask: torch.Tensor,
+    rule: str = "sum",
+    slack: float = 0.1,
+) -> torch.Tensor:
+    """(N, 27) safety and goal Q values, (N, 27) feasibility flags -> (N,) chosen actions.
+
+    ``sum``: argmax over feasible a of Q_S(s, a) + Q_G(s, a).
+    ``lexicographic``: S = {feasible a : Q_S(s, a) >= max_feasible Q_S(s, .) - slack};
+    argmax over a in S of Q_G(s, a).
+    """
+    infeasible = mask == 0
+    if rule == "sum":
+        return (q_safety + q_goal).masked_fill(infeasible, -torch.inf).argmax(dim=1)
+    if rule == "lexicographic":
+        qs = q_safety.masked_fill(infeasible, -torch.inf)
+        best = qs.max(dim=1, keepdim=True).values
+        unsafe = qs < best - slack
+        return q_goal.masked_fill(unsafe | infeasible, -torch.inf).argmax(dim=1)
+    raise ValueError(f"combination rule must be one of {RULES}, got {rule!r}")
+
+
+@dataclass
+class SafeDQNConfig:
+    obs_dim: int
+    width: int = 128
+    rule: str = "sum"
+    slack: float = 0.1
+
+
+class SafeDQNNet(nn.Module):
+    """Two Q networks, each three hidden layers of ``width``: obs (N, F) -> (Q_S, Q_G), (N, 27)."""
+
+    def __init__(self, cfg: SafeDQNConfig):
+        super().__init__()
+        if cfg.rule not in RULES:
+            raise ValueError(f"combination rule must be one of {RULES}, got {cfg.rule!r}")
+        self.cfg = cfg
+        self.q_safety = mlp(cfg.obs_dim, cfg.width, N_ACTIONS, layers=4)
+        self.q_goal = mlp(cfg.obs_dim, cfg.width, N_ACTIONS, layers=4)
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.q_safety(obs), self.q_goal(obs)
+
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        qs, qg = self(obs)
+        return combine(qs, qg, mask, self.cfg.rule, self.cfg.slack)
+
+
+class SafeDQN:
+    """Online and target networks, Adam, and one update of both components (Huber loss)."""
+
+    def __init__(self, cfg: SafeDQNConfig, lr: float = 1e-4):
+        self.net = SafeDQNNet(cfg)
+        self.target: SafeDQNNet = frozen_copy(self.net)  # type: ignore[assignment]
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
+        self.cfg = cfg
+
+    @torch.no_grad()
+    def targets(
+        self, b: dict[str, torch.Tensor], gamma: float
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """y_S = r_S + gamma (1 - done) Q_S'(s', a*), y_G likewise, a* = rule on the online
+        networks over the next state's feasible actions."""
+        qs_on, qg_on = self.net(b["next_obs"])
+        a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)
+        qs_t, qg_t = self.target(b["next_obs"])
+        idx = torch.arange(len(a_star))
+        cont = gamma * (1.0 - b["done"])
+        return (
+            b["safety_reward"] + cont * qs_t[idx, a_star],
+            b["goal_reward"] + cont * qg_t[idx, a_star],
+        )
+
+    def update(self, b: dict[str, torch.Tensor], gamma: float, polyak: float) -> dict[str, float]:
+        y_s, y_g = self.targets(b, gamma)
+        qs, qg = self.net(b["obs"])
+        idx = torch.arange(len(b["action"]))
+        loss_s = F.smooth_l1_loss(qs[idx, b["action"]], y_s)
+        loss_g = F.smooth_l1_loss(qg[idx, b["action"]], y_g)
+        self.opt.zero_grad()
+        (loss_s + loss_g).backward()
+        nn.utils.clip_grad_norm_(self.net.parameters(), 10.0)
+        self.opt.step()
+        polyak_update(self.target, self.net, polyak)
+        return {"loss_safety": float(loss_s.item()), "loss_goal": float(loss_g.item())}
+
+    def state_dict(self) -> dict:
+        return {
+            "net": self.net.state_dict(),
+            "target": self.target.state_dict(),
+            "opt": self.opt.state_dict(),
+        }
+
+    def load_state_dict(self, st: dict) -> None:
+        self.net.load_state_dict(st["net"])
+        self.target.load_state_dict(st["target"])
+        self.opt.load_state_dict(st["opt"])
+
+
+def save_net(path: str, net: SafeDQNNet, meta: dict) -> None:
+    torch.save({"config": asdict(net.cfg), "state_dict": net.state_dict(), "meta": meta}, path)
+
+
+def load_net(path: str) -> SafeDQNNet:
+    """Rebuild from a checkpoint read with ``torch.load(weights_only=True)``."""
+    ck = torch.load(path, map_location="cpu", weights_only=True)
+    net = SafeDQNNet(SafeDQNConfig(**ck["config"]))
+    net.load_state_dict(ck["state_dict"])
+    return net.eval()
