@@ -6,7 +6,13 @@ import pytest
 
 from cdr_bench.evaluate.loader import AgentError, agent_identity
 
-AGENT = "class Agent:\n    def __init__(self, o, a):\n        pass\n    def act(self, o):\n        return 13\n"
+AGENT = (
+    "class Agent:\n"
+    "    def __init__(self, o, a):\n"
+    "        pass\n"
+    "    def act(self, o):\n"
+    "        return 13\n"
+)
 
 
 def make_agent(tmp_path):

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Train the paper's learned baselines at the Diffusion-AC reference budget and ship them.
+#
+#   PYTHON=.venv/bin/python bash agents/train_baselines.sh [BUDGET] [NAME ...]
+#
+# BUDGET defaults to 1374560 environment transitions, the length of the Diffusion-AC reference
+# run (agents/diffusion_ac/training_log.jsonl); NAME defaults to every baseline. Each baseline is
+# trained as in the paper (§5.2): without the DPSC curriculum, on the medium scenario (the same
+# condition as the W/O-DPSC ablation of Diffusion-AC), width 128, gamma 0.99, seed 1, with the
+# hyper-parameters chosen by the short tuning recorded in agents/BASELINES.md. The run goes to
+# runs/baselines/<name>-final/; its checkpoint (weights only), log, curve and arguments are copied
+# into agents/<dir>/, which is then scored on the paper suite with cdr-bench evaluate and timed
+# with cdr-bench latency.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+budget=${1:-1374560}
+shift || true
+names=("$@")
+[ ${#names[@]} -eq 0 ] && names=(ppo maskable-ppo td3 safe-dqn-x rainbow)
+py=${PYTHON:-python}
+export OMP_NUM_THREADS=1
+for name in "${names[@]}"; do
+    case $name in
+        ppo) dir=ppo; flags=() ;;
+        maskable-ppo) dir=maskable_ppo; flags=(--ent-coef 0.01) ;;
+        td3) dir=td3; flags=() ;;
+        safe-dqn-x) dir=safe_dqn_x; flags=() ;;
+        rainbow) dir=rainbow; flags=() ;;
+        *) echo "unknown baseline: $name" >&2; exit 2 ;;
+    esac
+    run=runs/baselines/$name-final
+    echo "$(date -u +%T) train $name -> $run (${flags[*]:-default flags})"
+    "$py" -m cdr_bench train "$name" --run-dir "$run" --seed 1 --total-steps "$budget" \
+        --no-curriculum --scenario medium --no-progress "${flags[@]}" > "$run.out" 2>&1
+    ag=agents/$dir
+    cp "$run/checkpoint.pt" "$ag/checkpoint.pt"
+    cp "$run/log.jsonl" "$ag/training_log.jsonl"
+    cp "$run/args.json" "$ag/train_args.json"
+    [ -f "$run/curve.png" ] && cp "$run/curve.png" "$ag/curve.png"
+    mkdir -p "$ag/eval" "$ag/analysis"
+    echo "$(date -u +%T) evaluate $name"
+    "$py" -m cdr_bench evaluate "$ag" --out "$ag/eval/paper.json" --no-progress > "$ag/eval/paper.txt"
+    "$py" -m cdr_bench latency "$ag" --out "$ag/analysis/latency.json" > "$ag/analysis/latency.md"
+    echo "$(date -u +%T) done $name"
+done
