@@ -6,7 +6,10 @@ this same file). The checkpoint is ``{"config": {...}, "state_dict": ..., "meta"
 read with ``torch.load(weights_only=True)``.
 
 Inference follows the paper (§4.2.2): y_T ~ N(0, I), T reverse steps, masked softmax (Eq. 33),
-argmax. The only randomness is y_T, drawn from a torch generator seeded by :meth:`reset`.
+argmax. The only randomness is y_T (and the reverse-step noise), drawn from a torch generator
+seeded by :meth:`reset`. Diffusion actors run on the numpy inference path
+(:mod:`cdr_bench.rl.fast_policy`, same arithmetic and random stream as the PyTorch module, ~3x
+faster at batch 1); the categorical actor of the "without diffusion" ablation runs in PyTorch.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 import torch
 
 from cdr_bench.rl.diffusion_ac import load_policy
+from cdr_bench.rl.fast_policy import FastDiffusionPolicy
 
 DEFAULT_CHECKPOINT = Path(__file__).with_name("checkpoint.pt")
 
@@ -27,12 +31,17 @@ class Agent:
         path = checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(DEFAULT_CHECKPOINT)
         self.checkpoint = path
         self.policy = load_policy(path)
+        self.fast = (
+            FastDiffusionPolicy(self.policy) if self.policy.cfg.actor == "diffusion" else None
+        )
         self.generator = torch.Generator().manual_seed(0)
 
     def reset(self, seed: int | None = None) -> None:
         self.generator.manual_seed(0 if seed is None else int(seed))
 
     def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        if self.fast is not None:
+            return self.fast.act(observations, masks, self.generator)
         obs = torch.as_tensor(np.asarray(observations, dtype=np.float32))
         mask = torch.as_tensor(np.asarray(masks, dtype=np.int8))
         with torch.no_grad():
