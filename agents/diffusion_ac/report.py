@@ -1,11 +1,11 @@
 """Regenerate the result tables of README.md from files in the repo (never typed by hand).
 
-Reads the ``{"final": ...}`` line of each shipped training log (quick evaluation on the batched
-simulator, seeds 10000.., argmax inference) and, when present, ``cdr-bench evaluate`` result
-JSONs under ``agents/diffusion_ac/eval/``. Published numbers are the paper's Tables 2 and 3,
-marked as published.
+Sources: ``cdr-bench evaluate`` result JSONs under ``eval/`` (written by ``evaluate_all.sh``), the
+``{"final": ...}`` line of each training log (the trainer's quick evaluation), the analysis JSONs
+under ``analysis/`` and the paper's Tables 2 and 3 as transcribed in ``leaderboard/published/``
+(shown as *published*, never mixed with ours).
 
-Run: python agents/diffusion_ac/report.py
+Run: python agents/diffusion_ac/report.py > /tmp/tables.md
 """
 
 from __future__ import annotations
@@ -13,21 +13,24 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+import yaml
 
-# Published (paper Table 2, Diffusion-AC row; Table 3, high density). Percent.
-PAPER_TABLE2 = {
-    "low": {"success": 100, "los": 0.2, "nmac": 0, "timeout": 0, "steps": 258},
-    "medium": {"success": 96.9, "los": 0.7, "nmac": 0.3, "timeout": 2.8, "steps": 279},
-    "high": {"success": 94.1, "los": 2.8, "nmac": 1.2, "timeout": 4.7, "steps": 302},
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+PUBLISHED = ROOT / "leaderboard" / "published"
+METRICS = ("success_rate", "los_rate", "nmac_rate", "timeout_rate")
+ABLATIONS = {  # checkpoint stem -> row of the paper's Table 3
+    "full-100k": "Diffusion-AC (Complete)",
+    "no-diffusion-100k": "W/O Diffusion",
+    "no-double-q-100k": "W/O Double Q",
+    "no-dpsc-100k": "W/O DPSC",
+    "no-value-guidance-100k": "W/O Value Guidance",
 }
-PAPER_TABLE3 = {
-    "complete": (94.1, 2.8, 1.2, 4.7, 302),
-    "no-diffusion": (89.2, 12.3, 6.4, 4.4, 342),
-    "no-double-q": (91.3, 4.5, 2.1, 6.6, 323),
-    "no-dpsc": (87.6, 6.4, 2.9, 9.5, 350),
-    "no-value-guidance": (4.1, 26.2, 11.2, 84.7, 953),
-}
+DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
+
+
+def published(table: str) -> dict:
+    return yaml.safe_load((PUBLISHED / f"{table}.yaml").read_text())
 
 
 def final_of(log: Path) -> dict | None:
@@ -37,80 +40,110 @@ def final_of(log: Path) -> dict | None:
     return finals[-1] if finals else None
 
 
-def row(name: str, ev: dict, extra: str = "") -> str:
-    return (
-        f"| {name} | {100 * ev['success']:.1f} | {100 * ev['los']:.1f} | {100 * ev['nmac']:.1f} "
-        f"| {100 * ev['timeout']:.1f} | {ev['steps_success']:.0f} | {ev['episodes']} |{extra}"
-    )
+def scenario_metrics(result: Path) -> dict[str, dict]:
+    """scenario id -> ownship metrics of a cdr-bench evaluate result file."""
+    data = json.loads(result.read_text())
+    return {sc["id"]: sc["metrics"]["ownship"] for sc in data["scenarios"]}
+
+
+def pct(m: dict, key: str) -> str:
+    v = m[key]
+    lo, hi = v["ci95"]
+    return f"{100 * v['value']:.1f} [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def steps(m: dict) -> str:
+    v = m.get("avg_steps_success")
+    if not isinstance(v, dict) or v.get("value") is None:
+        return "—"
+    return f"{v['value']:.1f}"
+
+
+def measured_row(label: str, m: dict) -> str:
+    cells = " | ".join(pct(m, k) for k in METRICS)
+    return f"| {label} | {m['episodes']} | {cells} | {steps(m)} |"
+
+
+def published_row(label: str, values: list) -> str:
+    return f"| {label} | 1000 | " + " | ".join(str(v) for v in values[:5]) + " |"
+
+
+HEADER = (
+    "| {} | n | success % | LoS % | NMAC % | timeout % | steps (successful) |\n"
+    "|---|---:|---:|---:|---:|---:|---:|"
+)
 
 
 def main() -> None:
-    hdr = "| {} | success % | LoS % | NMAC % | timeout % | steps (successful) | episodes |"
-    sep = "|---|---:|---:|---:|---:|---:|---:|"
+    t2 = {(r["agent"], r["density"]): r["values"] for r in published("table2")["rows"]}
+    t3 = {r["variant"]: r["values"] for r in published("table3")["rows"]}
+
+    print("### Reference checkpoint on the paper suite (`cdr-bench evaluate`, 95 % intervals)\n")
+    paper = HERE / "eval" / "paper.json"
+    if paper.exists():
+        print(HEADER.format("scenario"))
+        for sid, m in scenario_metrics(paper).items():
+            print(measured_row(f"{sid} — measured here", m))
+            if ("Diffusion-AC", sid) in t2:
+                print(published_row(f"{sid} — paper Table 2 (published)", t2["Diffusion-AC", sid]))
     ref = final_of(HERE / "training_log.jsonl")
-    print("### Reference checkpoint, quick evaluation (argmax, seeds 10000..)\n")
-    print(hdr.format("density"))
-    print(sep)
-    for d in ("low", "medium", "high"):
-        if ref and f"eval/{d}" in ref:
-            print(row(f"{d} (cdr-bench, measured)", ref[f"eval/{d}"]))
-        p = PAPER_TABLE2[d]
-        print(
-            f"| {d} (paper Table 2, published) | {p['success']} | {p['los']} | {p['nmac']} "
-            f"| {p['timeout']} | {p['steps']} | 1000 |"
-        )
     if ref:
         print(
-            f"\nTraining: {ref['step']} transitions, {ref['updates']} updates, "
-            f"{ref['wall_s'] / 60:.1f} min wall, final DPSC stage {ref['stage']}."
+            f"\nTraining: {ref['step']:,} transitions, {ref['updates']:,} updates, "
+            f"{ref['wall_s'] / 60:.0f} min wall, final DPSC stage {ref['stage']} of 12."
         )
-    evals = sorted((HERE / "eval").glob("*.json")) if (HERE / "eval").exists() else []
-    if evals:
-        print("\n### `cdr-bench evaluate` (official scorer, 95 % Wilson intervals)\n")
-        print("| file | scenario | n | success % | LoS % | NMAC % | timeout % | clean success % |")
-        print("|---|---|---:|---:|---:|---:|---:|---:|")
-    for f in evals:
-        for sc in json.loads(f.read_text())["scenarios"]:
-            m = sc["metrics"]["ownship"]
 
-            def pct(k, m=m):
-                v = m[k]
-                lo, hi = v["ci95"]
-                return f"{100 * v['value']:.1f} [{100 * lo:.1f}, {100 * hi:.1f}]"
+    print("\n### Table 3 ablations at 100k transitions, high density (`cdr-bench evaluate`)\n")
+    print(HEADER.format("variant"))
+    for stem, variant in ABLATIONS.items():
+        f = HERE / "eval" / f"ablation-{stem}.json"
+        if f.exists():
+            print(measured_row(f"{stem} — measured here", scenario_metrics(f)["high"]))
+        else:
+            print(f"| {stem} — not evaluated | | | | | | |")
+        print(published_row(f"{variant} — paper Table 3 (published)", t3[variant]))
 
-            print(
-                f"| eval/{f.name} | {sc['id']} | {m['episodes']} | {pct('success_rate')} "
-                f"| {pct('los_rate')} | {pct('nmac_rate')} | {pct('timeout_rate')} "
-                f"| {pct('clean_success_rate')} |"
-            )
-    print("\n### Short runs (same seed and budget), high density quick evaluation\n")
-    print(hdr.format("variant") + " transitions | published (Table 3: succ/LoS/NMAC/timeout) |")
-    print(sep + "---:|---|")
-    for log in sorted((HERE / "ablations").glob("*.log.jsonl")):
-        name = log.name.removesuffix(".log.jsonl")
-        ev = final_of(log)
+    print("\n### Design decisions: short runs, same seed (trainer's quick evaluation, high)\n")
+    print("| run | transitions | success % | LoS % | NMAC % | timeout % | episodes |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name in DESIGN_RUNS:
+        ev = final_of(HERE / "ablations" / f"{name}.log.jsonl")
         if not ev or "eval/high" not in ev:
-            print(f"| {name} | not finished | | | | | | | |")
             continue
-        pub = PAPER_TABLE3.get("complete" if name.startswith("default") else name)
-        pub_s = "/".join(str(x) for x in pub[:4]) if pub else "—"
-        print(row(name, ev["eval/high"], f" {ev['step']} | {pub_s} |"))
-    print("\n### Short runs, all densities (success % / LoS % / NMAC %)\n")
-    print("| variant | low | medium | high |")
-    print("|---|---|---|---|")
-    for log in sorted((HERE / "ablations").glob("*.log.jsonl")):
-        ev = final_of(log)
-        if not ev:
-            continue
-        cells = []
-        for d in ("low", "medium", "high"):
-            e = ev.get(f"eval/{d}")
-            cells.append(
-                f"{100 * e['success']:.0f} / {100 * e['los']:.0f} / {100 * e['nmac']:.0f}"
-                if e
-                else "—"
+        e = ev["eval/high"]
+        print(
+            f"| {name} | {ev['step']:,} | {100 * e['success']:.0f} | {100 * e['los']:.0f} "
+            f"| {100 * e['nmac']:.0f} | {100 * e['timeout']:.0f} | {e['episodes']} |"
+        )
+
+    mm = sorted((HERE / "analysis").glob("multimodal-*.json"))
+    if mm:
+        print("\n### Multimodality of the first action (`cdr-bench multimodal`, Fig. 9)\n")
+        print(
+            "| scenario | samples | follow-on success % | modes ≥ 5 % (successful) "
+            "| normalised entropy | most sampled first actions (share of all samples) |"
+        )
+        print("|---|---:|---:|---:|---:|---|")
+        for f in mm:
+            d = json.loads(f.read_text())
+            allc = d["all"]
+            top = sorted(range(27), key=lambda a: -allc[a])[:3]
+            tops = ", ".join(f"{a} ({100 * allc[a] / d['samples']:.0f} %)" for a in top if allc[a])
+            print(
+                f"| {d['scenario']} | {d['samples']} | {100 * d['success_rate']:.1f} "
+                f"| {d['modes']} | {d['normalised_entropy']:.3f} | {tops} |"
             )
-        print(f"| {log.name.removesuffix('.log.jsonl')} | " + " | ".join(cells) + " |")
+
+    lat = HERE / "analysis" / "latency.json"
+    if lat.exists():
+        print("\n### Decision latency (`cdr-bench latency`, one thread)\n")
+        print("| batch | calls | median ms/call | p99 ms/call | median ms/decision |")
+        print("|---:|---:|---:|---:|---:|")
+        for r in json.loads(lat.read_text())["rows"]:
+            print(
+                f"| {r['batch']} | {r.get('calls', '—')} | {r['median_ms']:.3f} "
+                f"| {r['p99_ms']:.3f} | {r['median_ms_per_decision']:.4f} |"
+            )
 
 
 if __name__ == "__main__":
