@@ -68,7 +68,7 @@ class OwnshipEnv(gym.Env):
         """Feasible actions of the ownship now, (27,) bool."""
         return self.par_env.sim.action_masks()[0, 0].astype(bool)
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]  # gymnasium<1.2 stubs
         return self.par_env.render()
 
     def close(self) -> None:

@@ -68,7 +68,7 @@ AGENT_FILE_SUFFIXES = (
 logs, plots and result files in the agent's folder are not part of its identity, so writing an
 evaluation result inside the folder does not change the identity of the next run."""
 
-_SKIP_AGENT_DIRS = _SKIP_DIRS | {"eval", "results", "analysis", "runs"}
+_SKIP_AGENT_DIRS = _SKIP_DIRS | {"eval", "results", "analysis", "runs", "tuning"}
 
 CHECKPOINT_ENV = "CDR_BENCH_CHECKPOINT"
 """Environment variable an agent may read to load another checkpoint (the Diffusion-AC agent
@@ -78,7 +78,8 @@ scores its ablations this way); when set, the file it names is part of the ident
 def agent_files(path: str | os.PathLike[str]) -> list[Path]:
     """Files that make up the agent: its folder's code, weights and configuration (see
     :data:`AGENT_FILE_SUFFIXES`) when the agent is a folder or a file named ``agent.py``, else
-    the single file. Folders ``eval``, ``results``, ``analysis`` and ``runs`` are outputs."""
+    the single file. Folders ``eval``, ``results``, ``analysis``, ``runs`` and ``tuning`` hold
+    outputs and are skipped."""
     f = resolve_agent_path(path)
     if f.name != "agent.py":
         return [f]

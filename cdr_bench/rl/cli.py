@@ -78,7 +78,14 @@ def register(sub: Any) -> None:
     la = sub.add_parser("latency", help="decision latency (median / p99 ms) per batch size")
     la.add_argument("agent", help="agent directory or agent.py")
     la.add_argument("--batch-sizes", default="1,8,64,256")
-    la.add_argument("--repeats", type=int, default=50)
+    la.add_argument(
+        "--decisions",
+        type=int,
+        default=1000,
+        help="decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
+    )
+    la.add_argument("--min-calls", type=int, default=20, help="timed calls per batch size (>=)")
+    la.add_argument("--warmup", type=int, default=20, help="untimed calls before timing")
     la.add_argument("--scenario", default="medium")
     la.add_argument("--threads", type=int, default=1)
     la.add_argument("--out", default=None)
@@ -244,28 +251,49 @@ def cmd_latency(ns: argparse.Namespace) -> int:
         torch.set_num_threads(ns.threads)
     except ImportError:  # pragma: no cover
         pass
-    sizes = [int(x) for x in ns.batch_sizes.split(",")]
+    err = _cli_error()
+    try:
+        sizes = [int(x) for x in ns.batch_sizes.split(",")]
+    except ValueError:
+        msg = f"--batch-sizes: expected integers separated by commas, got {ns.batch_sizes!r}"
+        raise err(msg) from None
+    if min(sizes) < 1 or ns.decisions < 1 or ns.min_calls < 1 or ns.warmup < 0:
+        raise err("--batch-sizes, --decisions and --min-calls must be >= 1, --warmup >= 0")
+    _check_scenario(ns.scenario)
     agent = _load(ns.agent)
     sim = Simulator(load_scenario(ns.scenario), n_episodes=max(sizes))
     sim.reset(np.arange(max(sizes)))
     obs, masks = observe(sim)[:, 0], sim.action_masks()[:, 0]
     rows = []
-    print("| batch | median ms/call | p99 ms/call | median ms/decision |")
-    print("|---:|---:|---:|---:|")
+    print("| batch | calls | decisions | median ms/call | p99 ms/call | median ms/decision |")
+    print("|---:|---:|---:|---:|---:|---:|")
     for n in sizes:
-        agent.act_batch(obs[:n], masks[:n])  # warm-up
-        ts = []
-        for _ in range(ns.repeats):
+        o, m = obs[:n], masks[:n]
+        for _ in range(ns.warmup):
+            agent.act_batch(o, m)
+        calls = max(ns.min_calls, math.ceil(ns.decisions / n))
+        ts = np.empty(calls)
+        for i in range(calls):
             t0 = time.perf_counter()
-            agent.act_batch(obs[:n], masks[:n])
-            ts.append((time.perf_counter() - t0) * 1e3)
+            agent.act_batch(o, m)
+            ts[i] = (time.perf_counter() - t0) * 1e3
         med, p99 = float(np.median(ts)), float(np.percentile(ts, 99))
         rows.append(
-            {"batch": n, "median_ms": med, "p99_ms": p99, "median_ms_per_decision": med / n}
+            {
+                "batch": n,
+                "calls": calls,
+                "decisions": calls * n,
+                "median_ms": med,
+                "p99_ms": p99,
+                "median_ms_per_decision": med / n,
+            }
         )
-        print(f"| {n} | {med:.2f} | {p99:.2f} | {med / n:.3f} |")
+        print(f"| {n} | {calls} | {calls * n} | {med:.3f} | {p99:.3f} | {med / n:.4f} |")
     if ns.out:
-        Path(ns.out).write_text(json.dumps({"agent": str(ns.agent), "rows": rows}, indent=1))
+        from cdr_bench.evaluate.results import atomic_write_text
+
+        res = {"agent": str(ns.agent), "scenario": ns.scenario, "threads": ns.threads, "rows": rows}
+        atomic_write_text(Path(ns.out), json.dumps(res, indent=1) + "\n")
     return 0
 
 

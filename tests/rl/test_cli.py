@@ -73,9 +73,21 @@ def test_train_checkpoint_resume_and_agent(tmp_path):
     )
     assert r.stdout.strip() == "ok", r.stderr
 
-    r = run("latency", "agents/diffusion_ac", "--batch-sizes", "1,4", "--repeats", "3", env=env)
+    r = run(
+        "latency",
+        "agents/diffusion_ac",
+        "--batch-sizes",
+        "1,4",
+        "--decisions",
+        "8",
+        "--min-calls",
+        "3",
+        env=env,
+    )
     assert r.returncode == 0, r.stderr
-    assert "| 4 |" in r.stdout
+    assert "| 1 | 8 | 8 |" in r.stdout and "| 4 | 3 | 12 |" in r.stdout  # calls, decisions
+    r = run("latency", "agents/diffusion_ac", "--batch-sizes", "1,x", env=env)
+    assert r.returncode == 2 and "--batch-sizes" in r.stdout + r.stderr
 
     out = tmp_path / "mm.json"
     r = run(
