@@ -9,6 +9,8 @@ import argparse
 import importlib
 import json
 import math
+import os
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -113,10 +115,26 @@ def _train_with(module: Any) -> Any:
     return cmd_train
 
 
-def _load(agent: str):
+def _load(agent: str, scenario: str = "medium"):
+    """The agent at ``agent`` (a folder with agent.py or a .py file), constructed with the
+    observation and action spaces of ``scenario`` as the evaluator does, so that any protocol
+    agent loads (classical agents read the spaces). Every failure is a one-line CLIError."""
     from cdr_bench.evaluate.loader import load_agent
+    from cdr_bench.evaluate.runner import spaces_for
+    from cdr_bench.scenarios import load_scenario
 
-    return load_agent(agent, None, None)
+    err = _cli_error()
+    try:
+        obs_space, act_space = spaces_for(load_scenario(scenario))
+    except Exception as e:
+        raise err(f"scenario {scenario!r}: {e}") from None
+    try:
+        return load_agent(agent, obs_space, act_space)
+    except err:
+        raise
+    except Exception as e:  # anything the loader did not already turn into a CLIError
+        msg = str(e).splitlines()[0] if str(e) else ""
+        raise err(f"agent {agent}: {type(e).__name__}: {msg}") from None
 
 
 def _check_scenario(name: str) -> None:
@@ -176,8 +194,9 @@ def mode_summary(counts: list[int], threshold: float = 0.05) -> dict:
     }
 
 
-def heatmap(counts: list[int], title: str, out_png: str) -> None:
-    """Fig. 9 style: three 3x3 panels (descend / level / climb), heading x speed."""
+def heatmap(counts: list[int], title: str, out_png: str | os.PathLike[str]) -> None:
+    """Fig. 9 style: three 3x3 panels (descend / level / climb), heading x speed. Written
+    atomically (temporary file in the same folder, then ``os.replace``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -197,8 +216,23 @@ def heatmap(counts: list[int], title: str, out_png: str) -> None:
             ax.text(k, r, f"{v:.2f}", ha="center", va="center", color="w")
     fig.colorbar(im, ax=axes, shrink=0.8, label="share of successful samples")
     fig.suptitle(title)
-    fig.savefig(out_png, dpi=80)
-    plt.close(fig)
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp.png", dir=out.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            fig.savefig(f, format="png", dpi=80)
+            f.flush()
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
 
 
 def cmd_multimodal(ns: argparse.Namespace) -> int:
@@ -206,7 +240,7 @@ def cmd_multimodal(ns: argparse.Namespace) -> int:
     if ns.samples < 1:
         raise err("--samples must be >= 1")
     _check_scenario(ns.scenario)
-    agent = _load(ns.agent)
+    agent = _load(ns.agent, ns.scenario)
     d = first_action_distribution(agent, ns.scenario, ns.samples, ns.seed, ns.max_steps)
     summ = mode_summary(d["success"], ns.threshold)
     res = {
@@ -231,13 +265,14 @@ def cmd_multimodal(ns: argparse.Namespace) -> int:
             f"successful {d['success'][a]:5d}"
         )
     if ns.out:
-        Path(ns.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(ns.out).write_text(json.dumps(res, indent=1))
+        from cdr_bench.evaluate.results import atomic_write_text
+
+        out = Path(ns.out)
+        # PNG first, JSON last: a JSON file means the run finished and its picture is there.
         heatmap(
-            d["success"],
-            f"{Path(str(ns.agent)).name} on {ns.scenario}",
-            str(Path(ns.out).with_suffix(".png")),
+            d["success"], f"{Path(str(ns.agent)).name} on {ns.scenario}", out.with_suffix(".png")
         )
+        atomic_write_text(out, json.dumps(res, indent=1) + "\n")
     return 0
 
 
