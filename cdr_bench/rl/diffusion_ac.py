@@ -97,6 +97,11 @@ class UpdateConfig:
     ce_input: str = "y0"
     """terminal CE input: "y0" = D(s, y0, 0) as in Eq. 39 (clean teacher logits as input, can be
     satisfied by copying), "noise" = D(s, y_T ~ N(0, I), T) (the inference input), "none" = no CE"""
+    diffusion_target: str = "teacher"
+    """regression target of the denoiser: "teacher" = y0 = log(p* + eps/27), Eq. 38 (one
+    deterministic vector per state, so the optimal denoiser ignores y_t and the argmax policy is
+    unimodal up to fitting error); "sample" = log(onehot(a) + eps/27) with a ~ p* (the data
+    distribution is then multimodal and the reverse chain maps different y_T to different modes)"""
 
 
 def teacher_distribution(
@@ -135,7 +140,7 @@ class DiffusionAC:
             return teacher_distribution(q, mask, tau, self.ucfg.tau_relative)
 
     def update(self, b: dict[str, torch.Tensor], tau: float) -> dict[str, float]:
-        u, sch = self.ucfg, self.policy.schedule
+        u = self.ucfg
         obs, mask, a = b["obs"], b["mask"], b["action"]
         # (A) critics: masked double-Q max target (Eq. 34-35).
         with torch.no_grad():
@@ -152,37 +157,55 @@ class DiffusionAC:
         self.opt_critic.step()
         # (B) teacher (Eq. 37-38) with the updated critics held fixed.
         p_star = self.teacher(obs, mask, tau)
-        y0 = torch.log(p_star + u.eps_smooth / N_ACTIONS)
         stats = {"loss_q": loss_q.item(), "q_mean": q1a.mean().item()}
-        if self.cfg.actor == "categorical":
-            logp = torch.log_softmax(masked_logits(self.policy.net(obs), mask), -1)
-            loss_pi = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
-            stats["loss_ce"] = loss_pi.item()
-        else:
-            # (C) forward diffusion, (D) denoising regression + terminal CE (Eq. 39-41).
-            n = obs.shape[0]
-            t = torch.randint(1, sch.T + 1, (n,))
-            yt = sch.q_sample(y0, t, torch.randn_like(y0))
-            net = self.policy.net
-            h = net.encode(obs)
-            loss_diff = ((net.forward_h(h, yt, t) - y0) ** 2).sum(-1).mean()
-            loss_pi = loss_diff
-            stats["loss_diff"] = loss_diff.item()
-            if u.ce_input != "none" and u.ce_weight > 0:
-                if u.ce_input == "y0":
-                    term = net.forward_h(h, y0, torch.zeros(n, dtype=torch.long))
-                else:
-                    term = net.forward_h(h, torch.randn_like(y0), torch.full((n,), sch.T))
-                logp = torch.log_softmax(masked_logits(term, mask), -1)
-                loss_ce = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
-                loss_pi = loss_pi + u.ce_weight * loss_ce
-                stats["loss_ce"] = loss_ce.item()
+        loss_pi, actor_stats = self.actor_loss(obs, mask, p_star)
+        stats.update(actor_stats)
         self.opt_actor.zero_grad(set_to_none=True)
         loss_pi.backward()
         self.opt_actor.step()
         # (E) Polyak averaging of the targets (Eq. 36).
         polyak_update(self.critic_target, self.critic, u.polyak)
         return stats
+
+    def actor_loss(
+        self, obs: torch.Tensor, mask: torch.Tensor, p_star: torch.Tensor
+    ) -> tuple[torch.Tensor, dict[str, float]]:
+        """Steps (C)-(D) of Algorithm 1: the actor's loss given the teacher p* (Eq. 38-41); the
+        categorical actor of the "without diffusion" ablation is distilled by cross-entropy."""
+        u, sch = self.ucfg, self.policy.schedule
+        y0 = torch.log(p_star + u.eps_smooth / N_ACTIONS)
+        if self.cfg.actor == "categorical":
+            logp = torch.log_softmax(masked_logits(self.policy.net(obs), mask), -1)
+            loss_pi = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
+            return loss_pi, {"loss_ce": loss_pi.item()}
+        target = y0
+        if u.diffusion_target == "sample":
+            a = torch.multinomial(p_star, 1).squeeze(-1)
+            onehot = torch.nn.functional.one_hot(a, N_ACTIONS).to(y0.dtype)
+            target = torch.log(onehot + u.eps_smooth / N_ACTIONS)
+        elif u.diffusion_target != "teacher":
+            raise ValueError(
+                f"diffusion_target must be 'teacher' or 'sample', got {u.diffusion_target!r}"
+            )
+        # (C) forward diffusion, (D) denoising regression + terminal CE (Eq. 39-41).
+        n = obs.shape[0]
+        t = torch.randint(1, sch.T + 1, (n,))
+        yt = sch.q_sample(target, t, torch.randn_like(target))
+        net = self.policy.net
+        h = net.encode(obs)
+        loss_diff = ((net.forward_h(h, yt, t) - target) ** 2).sum(-1).mean()
+        loss_pi = loss_diff
+        stats = {"loss_diff": loss_diff.item()}
+        if u.ce_input != "none" and u.ce_weight > 0:
+            if u.ce_input == "y0":
+                term = net.forward_h(h, y0, torch.zeros(n, dtype=torch.long))
+            else:
+                term = net.forward_h(h, torch.randn_like(y0), torch.full((n,), sch.T))
+            logp = torch.log_softmax(masked_logits(term, mask), -1)
+            loss_ce = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
+            loss_pi = loss_pi + u.ce_weight * loss_ce
+            stats["loss_ce"] = loss_ce.item()
+        return loss_pi, stats
 
     def state_dict(self) -> dict:
         return {

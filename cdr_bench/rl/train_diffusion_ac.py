@@ -89,6 +89,8 @@ class Args:
     """lambda_CE of Eq. 39"""
     ce_input: str = "y0"
     """terminal-CE input: y0 (Eq. 39 literal), noise (y_T ~ N(0, I) at t = T) or none"""
+    diffusion_target: str = "teacher"
+    """denoiser target: teacher (Eq. 38 literal, log p*) or sample (log one-hot of a ~ p*)"""
     eps_smooth: float = 0.01
     """label smoothing epsilon of Eq. 38"""
     failure_penalty: float = 5.0
@@ -150,6 +152,7 @@ def build_agent(args: Args, obs_dim: int) -> DiffusionAC:
         tau_relative=args.tau_relative,
         ce_weight=args.ce_weight,
         ce_input=args.ce_input,
+        diffusion_target=args.diffusion_target,
     )
     return DiffusionAC(pcfg, ucfg)
 
@@ -165,6 +168,12 @@ def train(args: Args) -> dict:
         raise ValueError(f"ablation must be one of {ABLATIONS}, got {args.ablation!r}")
     if args.schedule not in SCHEDULES:
         raise ValueError(f"schedule must be one of {SCHEDULES}, got {args.schedule!r}")
+    if args.ce_input not in ("y0", "noise", "none"):
+        raise ValueError(f"ce_input must be one of y0, noise, none, got {args.ce_input!r}")
+    if args.diffusion_target not in ("teacher", "sample"):
+        raise ValueError(
+            f"diffusion_target must be one of teacher, sample, got {args.diffusion_target!r}"
+        )
     use_curriculum = args.curriculum and args.ablation != "no-dpsc"
     os.makedirs(args.run_dir, exist_ok=True)
     torch.set_num_threads(args.threads)

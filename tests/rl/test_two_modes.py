@@ -5,12 +5,13 @@ The problem: four fixed random 42-D states; in each, Q is 1 on two classes (``GO
 -1 elsewhere, one class is masked. The teacher is the project's ``teacher_distribution`` (Eq. 37,
 relative temperature 0.1), which gives 0.5 / 0.5 on the two good classes.
 
-(a) Diffusion: the denoiser of ``Policy`` is trained with the update's actor loss (forward
-diffusion with ``Schedule.q_sample``, x0-prediction regression, terminal CE on D(s, y0, 0) with
-``ce_weight``), and acts through ``Policy.act``: argmax of the masked head, stochastic through
-y_T only. Its regression target here is the log-smoothed one-hot of an action *sampled from the
-teacher*. The shipped update (``DiffusionAC.update``) regresses onto the deterministic
-log-teacher ``log(p* + eps / 27)`` instead; with that target the denoiser's optimum does not
+(a) Diffusion: the denoiser of ``Policy`` is trained with ``DiffusionAC.actor_loss`` (forward
+diffusion, x0-prediction regression, terminal CE on D(s, y0, 0)) with
+``UpdateConfig(diffusion_target="sample")``: the regression target is the log-smoothed one-hot of
+an action *sampled from the teacher*. It acts through ``Policy.act``: argmax of the masked head,
+stochastic through y_T only. The paper's target (Eq. 38, ``diffusion_target="teacher"``, the
+default and what the shipped checkpoint was trained with) is the deterministic log-teacher
+``log(p* + eps / 27)``; with that target the denoiser's optimum does not
 depend on y_t, and in a run of this problem (8 states, 1500 updates, width 32) the argmax put at
 least 20 % on each good class in 1 state of 8 (shares 500/0, 0/500, 0/500, 76/424, 0/500, 0/500,
 488/12, 300/200): the tie is broken by the fit's bias, not by y_T. So this test shows what the
@@ -23,7 +24,13 @@ diffusion head represents when trained on sampled actions, not that the shipped 
 import torch
 
 from cdr_bench.rl.diffusion import masked_logits
-from cdr_bench.rl.diffusion_ac import Policy, PolicyConfig, UpdateConfig, teacher_distribution
+from cdr_bench.rl.diffusion_ac import (
+    DiffusionAC,
+    Policy,
+    PolicyConfig,
+    UpdateConfig,
+    teacher_distribution,
+)
 from cdr_bench.rl.networks import N_ACTIONS
 
 GOOD = (4, 22)
@@ -42,31 +49,21 @@ def problem() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
 
 
 def train(actor: str, obs: torch.Tensor, mask: torch.Tensor, p_star: torch.Tensor) -> Policy:
+    """The trainer's own actor loss (``DiffusionAC.actor_loss``, steps C-D of Algorithm 1) with
+    the teacher held fixed; the diffusion actor uses ``diffusion_target="sample"``."""
     torch.manual_seed(1)
-    u = UpdateConfig()
-    policy = Policy(PolicyConfig(width=32, n_blocks=1, actor=actor))
-    net, sch = policy.net, policy.schedule
-    opt = torch.optim.Adam(policy.parameters(), lr=3e-3)
+    dac = DiffusionAC(
+        PolicyConfig(width=32, n_blocks=1, actor=actor),
+        UpdateConfig(diffusion_target="sample"),
+    )
+    opt = torch.optim.Adam(dac.policy.parameters(), lr=3e-3)
     for _ in range(UPDATES):
         i = torch.randint(0, N_STATES, (BATCH,))
-        o, m, p = obs[i], mask[i], p_star[i]
-        if actor == "categorical":
-            logp = torch.log_softmax(masked_logits(net(o), m), -1)
-            loss = -(p * logp.masked_fill(m == 0, 0.0)).sum(-1).mean()
-        else:
-            a = torch.multinomial(p, 1).squeeze(-1)
-            y0 = torch.log(torch.nn.functional.one_hot(a, N_ACTIONS) + u.eps_smooth / N_ACTIONS)
-            t = torch.randint(1, sch.T + 1, (BATCH,))
-            yt = sch.q_sample(y0, t, torch.randn_like(y0))
-            h = net.encode(o)
-            loss = ((net.forward_h(h, yt, t) - y0) ** 2).sum(-1).mean()
-            term = net.forward_h(h, y0, torch.zeros(BATCH, dtype=torch.long))
-            logp = torch.log_softmax(masked_logits(term, m), -1)
-            loss = loss + u.ce_weight * -(p * logp.masked_fill(m == 0, 0.0)).sum(-1).mean()
+        loss, _ = dac.actor_loss(obs[i], mask[i], p_star[i])
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-    return policy
+    return dac.policy
 
 
 def argmax_shares(policy: Policy, obs: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
