@@ -26,6 +26,7 @@ _SUBCOMMAND_MODULES = (
     "cdr_bench.evaluate.cli",
     "cdr_bench.rl.cli",
     "cdr_bench.leaderboard.cli",
+    "cdr_bench.scale.cli",
 )
 
 

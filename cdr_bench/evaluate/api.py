@@ -37,6 +37,9 @@ SUITES: dict[str, tuple[str, ...]] = {
 }
 """Named suites: scenario names, each run at ``PAPER_EPISODES`` episodes unless overridden."""
 
+BACKENDS = ("local", "ray")
+"""Where ``evaluate`` runs its episode batches: local processes or Ray tasks."""
+
 SEED_DERIVATION = (
     "seed_i = int(sha256(f'{base_seed}/{scenario_id}/{config_hash}/{i}')[:8], big-endian) >> 1"
 )
@@ -102,8 +105,14 @@ def evaluate(
     batch_size: int = DEFAULT_BATCH_SIZE,
     decision_timeout_s: float = DEFAULT_DECISION_TIMEOUT_S,
     progress: bool = True,
+    backend: str = "local",
+    address: str | None = None,
 ) -> dict[str, Any]:
     """Run every job, write ``out`` (JSON) and its JSONL, and return the result dict.
+
+    ``backend`` runs the episode batches in ``workers`` local processes (``"local"``) or as Ray
+    tasks (``"ray"``: a local Ray with ``workers`` CPUs, or the cluster at ``address``); the
+    result is the same either way, only ``timing`` differs.
 
     Raises :class:`AgentError` (nothing written, checkpoint removed) when the agent cannot be
     loaded or misbehaves; an interruption leaves only the checkpoint ``<out>.partial.jsonl``.
@@ -113,6 +122,10 @@ def evaluate(
         raise CLIError(f"--out {out}: expected a .json path")
     if workers < 1:
         raise CLIError(f"--workers must be >= 1, got {workers}")
+    if backend not in BACKENDS:
+        raise CLIError(f"--backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
+    if address is not None and backend != "ray":
+        raise CLIError("--address needs --backend ray")
     if batch_size < 1:
         raise CLIError(f"--batch-size must be >= 1, got {batch_size}")
     identity = agent_identity(agent_path)
@@ -161,7 +174,7 @@ def evaluate(
     bar = _progress(total, already, identity["name"], progress)
     t0 = time.perf_counter()
     try:
-        for batch in _run_tasks(tasks, workers):
+        for batch in _run_tasks(tasks, workers, backend, address):
             log.append(batch)
             done[(batch["scenario"], batch["batch"])] = batch
             bar.update(len(batch["episodes"]))
@@ -222,6 +235,7 @@ def evaluate(
             "episodes_run": ran,
             "episodes_per_s": round(ran / wall, 2) if wall > 0 and ran else None,
             "workers": workers,
+            "backend": backend,
             "resumed": bool(already),
             "decision_timeout_s": decision_timeout_s,
             "decision_latency": latency,
@@ -232,7 +246,14 @@ def evaluate(
     return result
 
 
-def _run_tasks(tasks: list[tuple[Any, ...]], workers: int):
+def _run_tasks(
+    tasks: list[tuple[Any, ...]], workers: int, backend: str = "local", address: str | None = None
+):
+    if backend == "ray":
+        from cdr_bench.scale.ray_eval import run_tasks_on_ray
+
+        yield from run_tasks_on_ray(tasks, workers, address)
+        return
     if workers == 1 or len(tasks) <= 1:
         for t in tasks:
             yield run_batch_task(*t)

@@ -32,6 +32,17 @@ def register(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="base seed of the episode seeds (0)")
     p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
     p.add_argument("--workers", type=int, default=1, help="processes running batches (1)")
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="run batches in local processes or as Ray tasks (the ray extra); same results",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: the cluster address (default: a local Ray of --workers CPUs)",
+    )
     p.add_argument("--resume", action="store_true", help="finish an interrupted run")
     p.add_argument(
         "--batch-size",
@@ -90,6 +101,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             DEFAULT_DECISION_TIMEOUT_S if args.decision_timeout is None else args.decision_timeout
         ),
         progress=not args.no_progress,
+        backend=args.backend,
+        address=args.address,
     )
     print(summary_table(result))
     print(f"wrote {out} and {out.with_suffix('.jsonl')}")

@@ -1,0 +1,76 @@
+"""``cdr-bench sweep`` and ``cdr-bench sweep-plot`` (registered by cdr_bench.cli)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "sweep",
+        help="train and evaluate a grid of settings x seeds on Ray (sweeps/*.yaml)",
+        description="Run a sweep file: each trial trains with `cdr-bench train` and is scored "
+        "with `cdr-bench evaluate`; one folder per trial (named by a hash of its settings) "
+        "holding the run, trial.json and result.json/.jsonl. Runs on a local Ray started on "
+        "demand, or on a cluster with --address.",
+    )
+    p.add_argument("sweep", help="sweep YAML file")
+    p.add_argument("--out", default=None, help="output folder (runs/sweeps/<name>)")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
+    p.add_argument("--resume", action="store_true", help="skip the trials already finished")
+    p.add_argument(
+        "--num-cpus", type=int, default=None, help="CPUs of the local Ray (all of this machine)"
+    )
+    p.add_argument(
+        "--total-steps", type=int, default=None, help="replace budget.total_steps (reduced run)"
+    )
+    p.add_argument(
+        "--episodes", type=int, default=None, help="replace evaluation.episodes (reduced run)"
+    )
+    p.add_argument("--dry-run", action="store_true", help="list the trials, run nothing")
+    p.add_argument("--quiet", action="store_true", help="no per-trial lines")
+    p.set_defaults(func=_sweep)
+
+    q = sub.add_parser(
+        "sweep-plot",
+        help="sensitivity panels (success, NMAC rate, latency, reward) of a finished sweep",
+    )
+    q.add_argument("sweep_dir", help="output folder of `cdr-bench sweep`")
+    q.add_argument("--out", default=None, help="PNG path (<sweep_dir>/sensitivity.png)")
+    q.add_argument("--json", default=None, help="also write the plotted numbers here")
+    q.set_defaults(func=_plot)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from cdr_bench.scale.config import load_sweep
+
+    sweep = load_sweep(args.sweep, total_steps=args.total_steps, episodes=args.episodes)
+    out = Path(args.out) if args.out else Path("runs") / "sweeps" / sweep.name
+    if args.dry_run:
+        for t in sweep.trials:
+            print(f"{t.key}  {t.factor:14s} {t.label:16s} seed {t.seed}")
+        print(f"{len(sweep.trials)} trials -> {out}")
+        return 0
+    from cdr_bench.scale.sweep import run_sweep
+
+    summary = run_sweep(
+        sweep,
+        out,
+        address=args.address,
+        resume=args.resume,
+        num_cpus=args.num_cpus,
+        progress=not args.quiet,
+    )
+    print(f"sweep {sweep.name}: {sum(t['done'] for t in summary['trials'])} trials in {out}")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from cdr_bench.scale.plot import plot_sweep
+
+    out = Path(args.out) if args.out else Path(args.sweep_dir) / "sensitivity.png"
+    plot_sweep(Path(args.sweep_dir), out, json_out=Path(args.json) if args.json else None)
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,115 @@
+"""``cdr-bench sweep-plot``: the sensitivity figure (paper Fig. 7) from a sweep's result files.
+
+Four panels, one per metric (rows): success rate, NMAC rate, median decision latency (ms) and
+episode reward (goal + safety terms), of the ownship, averaged over the evaluated scenarios;
+one column per varied factor. Each point is the mean over the trial's seeds, the error bar
+one standard deviation across seeds, the dots the single runs. The "default" trial (the centre
+of the one-factor-at-a-time design) is drawn in every column at the default value.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cdr_bench.cli import CLIError
+
+METRICS: tuple[tuple[str, str], ...] = (
+    ("success", "success rate"),
+    ("nmac", "NMAC rate"),
+    ("latency_ms", "decision latency (ms, median)"),
+    ("reward", "episode reward"),
+)
+
+
+def trial_metrics(result: dict[str, Any]) -> dict[str, float]:
+    """The four plotted numbers of one result file (mean over its scenarios)."""
+    rows: dict[str, list[float]] = {k: [] for k, _ in METRICS}
+    for s in result["scenarios"]:
+        own = s["metrics"]["ownship"]
+        rows["success"].append(own["success_rate"]["value"])
+        rows["nmac"].append(own["nmac_rate"]["value"])
+        rows["reward"].append(own["goal_reward"]["value"] + own["safety_reward"]["value"])
+        lat = result.get("timing", {}).get("decision_latency", {}).get(s["id"], {})
+        rows["latency_ms"].append(lat.get("per_decision_ms", {}).get("median", math.nan))
+    return {k: float(np.mean(v)) for k, v in rows.items()}
+
+
+def _sort_key(label: str) -> tuple[int, float, str]:
+    try:
+        return (1, float(label), label)
+    except ValueError:
+        return (0, 0.0, label)
+
+
+def collect(sweep_dir: Path) -> dict[str, Any]:
+    """``{factor: {label: {metric: [per-seed values]}}}`` plus the default labels."""
+    trials = []
+    for tj in sorted(sweep_dir.glob("*/trial.json")):
+        rec = json.loads(tj.read_text())
+        res = json.loads((tj.parent / rec["result"]).read_text())
+        trials.append((rec, trial_metrics(res)))
+    if not trials:
+        raise CLIError(f"{sweep_dir}: no finished trials (*/trial.json)")
+    fixed: dict[str, Any] = {}
+    sy = sweep_dir / "sweep.yaml"
+    if sy.is_file():
+        fixed = (yaml.safe_load(sy.read_text()) or {}).get("fixed", {}) or {}
+    factors = sorted({r["factor"] for r, _ in trials if r["factor"] != "default"}) or ["default"]
+    data: dict[str, dict[str, dict[str, list[float]]]] = {f: {} for f in factors}
+    defaults = {f: str(fixed[f]) if f in fixed else "default" for f in factors}
+    for rec, m in trials:
+        targets = factors if rec["factor"] == "default" else [rec["factor"]]
+        for f in targets:
+            label = defaults[f] if rec["factor"] == "default" else rec["label"]
+            cell = data[f].setdefault(label, {k: [] for k, _ in METRICS})
+            for k, _ in METRICS:
+                cell[k].append(m[k])
+    return {"factors": data, "defaults": defaults, "trials": len(trials)}
+
+
+def plot_sweep(sweep_dir: Path, out: Path, json_out: Path | None = None) -> dict[str, Any]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cdr_bench.evaluate.results import atomic_write_text
+
+    data = collect(sweep_dir)
+    factors = list(data["factors"])
+    fig, axes = plt.subplots(
+        len(METRICS), len(factors), figsize=(3.2 * len(factors), 2.4 * len(METRICS)), squeeze=False
+    )
+    for j, f in enumerate(factors):
+        cells = data["factors"][f]
+        labels = sorted(cells, key=_sort_key)
+        x = np.arange(len(labels))
+        for i, (k, title) in enumerate(METRICS):
+            ax = axes[i][j]
+            vals = [np.asarray(cells[lb][k], dtype=float) for lb in labels]
+            mean = [float(np.nanmean(v)) for v in vals]
+            std = [float(np.nanstd(v)) for v in vals]
+            ax.errorbar(x, mean, yerr=std, marker="o", capsize=3, color="C0")
+            for xi, v in zip(x, vals, strict=True):
+                ax.plot([xi] * len(v), v, ".", color="C0", alpha=0.35)
+            if data["defaults"][f] in labels:
+                ax.axvline(labels.index(data["defaults"][f]), color="0.7", ls=":", zorder=0)
+            ax.set_xticks(x, labels)
+            if i == len(METRICS) - 1:
+                ax.set_xlabel(f)
+            if j == 0:
+                ax.set_ylabel(title)
+    fig.suptitle(f"{sweep_dir.name}: mean ± std over seeds ({data['trials']} trials)", fontsize=10)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    if json_out is not None:
+        atomic_write_text(json_out, json.dumps(data, indent=1) + "\n")
+    return data

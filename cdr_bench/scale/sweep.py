@@ -1,0 +1,269 @@
+"""``cdr-bench sweep``: many training runs plus their evaluations, as Ray tasks.
+
+Why Ray core tasks and not Ray Tune: a trial here is an opaque, fixed piece of work (the
+project's own trainer, then ``cdr-bench evaluate``, each a subprocess writing ordinary files),
+and the sweep is a fixed list of them (a grid, a list, or one factor at a time). Tune's value
+is in what we do not need (search algorithms, early-stopping schedulers fed by intermediate
+reports, its own experiment state); its restore logic would be a second copy of the state that
+the result files already hold. A core task gives exactly the two guarantees the sweep needs:
+``max_retries`` re-runs a trial whose worker process or node died, and scheduling over every
+node of a cluster (``--address``) or a local one started on demand (no setup).
+
+Fault tolerance without a scheduler of our own:
+
+- a trial works in ``<out>/.work/<key>-<random>/`` and, when training and evaluation both
+  succeeded, renames that folder to ``<out>/<key>/`` (one ``rename``: atomic, and it fails if
+  the folder exists, so two attempts of one trial can never both land);
+- a trial folder exists only complete, with ``trial.json`` (settings, timings) and the result
+  files ``result.json`` / ``result.jsonl`` written by ``cdr-bench evaluate``;
+- ``--resume`` skips every trial whose folder exists; work folders of dead attempts are
+  garbage and removed at the end of the sweep.
+
+Ray is imported here only, lazily, and only by ``cdr-bench sweep``; the rest of the package
+never imports it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+from cdr_bench.cli import CLIError
+from cdr_bench.scale.config import Sweep, Trial
+
+TRIAL_FILE = "trial.json"
+RESULT_FILE = "result.json"
+
+
+def trial_done(out: Path, trial: Trial) -> bool:
+    return (out / trial.key / TRIAL_FILE).is_file()
+
+
+def _tail(path: Path, n: int = 12) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-n:])
+    except OSError:
+        return ""
+
+
+def run_trial(trial: Trial, out: str) -> dict[str, Any]:
+    """Train, evaluate and publish one trial (the body of the Ray task; also callable
+    directly). Returns the ``trial.json`` record. Raises ``RuntimeError`` when a step fails."""
+    from cdr_bench.evaluate.results import atomic_write_text
+
+    root = Path(out)
+    final = root / trial.key
+    if (final / TRIAL_FILE).is_file():  # an earlier attempt landed already
+        return json.loads((final / TRIAL_FILE).read_text())
+    work = root / ".work" / f"{trial.key}-{uuid.uuid4().hex[:8]}"
+    work.mkdir(parents=True)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    env.pop(_checkpoint_env(), None)
+    t0 = time.time()
+    steps: dict[str, float] = {}
+    train_cmd = [sys.executable, "-m", "cdr_bench", "train", *trial.train_argv(str(work))]
+    shutil.copyfile(trial.agent_file, work / "agent.py")
+    ev = trial.evaluation
+    eval_cmd = [sys.executable, "-m", "cdr_bench", "evaluate", str(work / "agent.py")]
+    for s in ev["scenarios"]:
+        eval_cmd += ["--scenario", s]
+    eval_cmd += ["--episodes", str(ev["episodes"]), "--seed", str(ev["seed"])]
+    if "batch_size" in ev:
+        eval_cmd += ["--batch-size", str(ev["batch_size"])]
+    eval_cmd += ["--out", str(work / RESULT_FILE), "--no-progress"]
+    for name, cmd in (("train", train_cmd), ("evaluate", eval_cmd)):
+        log = work / f"{name}.log"
+        ts = time.time()
+        with open(log, "w") as f:
+            rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env).returncode
+        steps[f"{name}_s"] = round(time.time() - ts, 2)
+        if rc != 0:
+            raise RuntimeError(f"trial {trial.key}: {name} exited with {rc}:\n{_tail(log)}")
+        if name == "train":  # the full training state (replay buffer): not needed afterwards
+            (work / "state.pt").unlink(missing_ok=True)
+    # the result names the folder it will live in, not the work folder
+    res_path = work / RESULT_FILE
+    res = json.loads(res_path.read_text())
+    res["agent"]["path"] = str(final / "agent.py")
+    atomic_write_text(res_path, json.dumps(res, indent=1) + "\n")
+    record = {
+        "key": trial.key,
+        "factor": trial.factor,
+        "label": trial.label,
+        "seed": trial.seed,
+        "agent": trial.agent,
+        "train_flags": trial.train_flags,
+        "train_command": ["cdr-bench", "train", *trial.train_argv(str(final))],
+        "evaluation": trial.evaluation,
+        "result": RESULT_FILE,
+        "host": os.uname().nodename,
+        "ray_node": _ray_node_id(),
+        "attempt": work.name,
+        "pid": os.getpid(),
+        "wall_s": round(time.time() - t0, 2),
+        **steps,
+    }
+    atomic_write_text(work / TRIAL_FILE, json.dumps(record, indent=1) + "\n")
+    try:
+        os.rename(work, final)
+    except OSError:  # another attempt of this trial landed first: keep that one
+        shutil.rmtree(work, ignore_errors=True)
+        if not (final / TRIAL_FILE).is_file():
+            raise
+        return json.loads((final / TRIAL_FILE).read_text())
+    return record
+
+
+def _ray_node_id() -> str | None:
+    if "ray" not in sys.modules:  # called outside Ray: do not import it
+        return None
+    import ray
+
+    return ray.get_runtime_context().get_node_id() if ray.is_initialized() else None
+
+
+def _checkpoint_env() -> str:
+    from cdr_bench.evaluate.loader import CHECKPOINT_ENV
+
+    return CHECKPOINT_ENV
+
+
+def run_sweep(
+    sweep: Sweep,
+    out: str | Path,
+    *,
+    address: str | None = None,
+    resume: bool = False,
+    num_cpus: int | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run every unfinished trial of ``sweep`` on Ray; write ``<out>/sweep.json``.
+
+    Raises :class:`CLIError` when ``out`` already holds trials and ``resume`` is false, or when
+    trials failed (after the finished ones were published)."""
+    from cdr_bench.evaluate.results import atomic_write_text
+
+    out = Path(out).resolve()
+    done = [t for t in sweep.trials if trial_done(out, t)]
+    if done and not resume:
+        raise CLIError(
+            f"{out} already holds {len(done)} finished trial(s) of this sweep; "
+            "add --resume to run only the missing ones (or choose another --out)"
+        )
+    todo = [t for t in sweep.trials if not trial_done(out, t)]
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(sweep.source, out / "sweep.yaml")
+    say = print if progress else (lambda *a, **k: None)
+    say(
+        f"sweep {sweep.name}: {len(sweep.trials)} trials, {len(done)} finished, "
+        f"{len(todo)} to run -> {out}",
+        file=sys.stderr,
+    )
+    failures: dict[str, str] = {}
+    if todo:
+        failures = _run_on_ray(todo, out, sweep, address, num_cpus, say)
+    shutil.rmtree(out / ".work", ignore_errors=True)
+    summary = {
+        "name": sweep.name,
+        "sweep_file": str(sweep.source),
+        "agent": sweep.agent,
+        "trials": [
+            {
+                "key": t.key,
+                "factor": t.factor,
+                "label": t.label,
+                "seed": t.seed,
+                "done": trial_done(out, t),
+            }
+            for t in sweep.trials
+        ],
+        "failures": failures,
+    }
+    atomic_write_text(out / "sweep.json", json.dumps(summary, indent=1) + "\n")
+    if failures:
+        first = next(iter(failures.values()))
+        raise CLIError(
+            f"{len(failures)} of {len(sweep.trials)} trials failed (see {out}/sweep.json); "
+            f"the others are kept; first: {first.splitlines()[0]}"
+        )
+    return summary
+
+
+def _run_on_ray(
+    todo: list[Trial],
+    out: Path,
+    sweep: Sweep,
+    address: str | None,
+    num_cpus: int | None,
+    say: Any,
+) -> dict[str, str]:
+    try:
+        import ray
+    except ImportError:
+        raise CLIError('cdr-bench sweep needs Ray: pip install "cdr-bench[ray]"') from None
+    import logging
+
+    started = not ray.is_initialized()
+    if started:
+        ray_init(ray, address, num_cpus)
+    task = ray.remote(run_trial).options(
+        num_cpus=sweep.num_cpus_per_trial,
+        max_retries=sweep.max_retries,
+        retry_exceptions=False,
+    )
+    logging.getLogger("ray").setLevel(logging.ERROR)
+    refs = {task.remote(t, str(out)): t for t in todo}
+    failures: dict[str, str] = {}
+    n = 0
+    try:
+        while refs:
+            ready, _ = ray.wait(list(refs), num_returns=1)
+            t = refs.pop(ready[0])
+            n += 1
+            try:
+                rec = ray.get(ready[0])
+                say(
+                    f"[{n}/{len(todo)}] {t.key} {t.factor} {t.label} seed {t.seed}: done "
+                    f"in {rec['wall_s']} s on {rec['host']}",
+                    file=sys.stderr,
+                )
+            except ray.exceptions.RayError as e:
+                cause = getattr(e, "cause", None) or e
+                failures[t.key] = f"{type(cause).__name__}: {cause}"
+                say(
+                    f"[{n}/{len(todo)}] {t.key}: FAILED {failures[t.key].splitlines()[0]}",
+                    file=sys.stderr,
+                )
+    finally:
+        if started:
+            ray.shutdown()
+    return failures
+
+
+def ray_init(ray: Any, address: str | None, num_cpus: int | None) -> None:
+    """Connect to ``address`` or start a local Ray (quiet: no dashboard, no log forwarding)."""
+    import logging
+
+    os.environ.setdefault("RAY_ACCEL_ENV_VAR_OVERRIDE_ON_ZERO", "0")  # silence a FutureWarning
+    kw: dict[str, Any] = {
+        "logging_level": logging.ERROR,
+        "log_to_driver": False,
+        "configure_logging": True,
+    }
+    if address:
+        kw["address"] = address
+    else:
+        kw["include_dashboard"] = False
+        if num_cpus is not None:
+            kw["num_cpus"] = num_cpus
+    try:
+        ray.init(**kw)
+    except (ConnectionError, RuntimeError, ValueError) as e:
+        raise CLIError(f"cannot start or reach Ray at {address or 'local'}: {e}") from None

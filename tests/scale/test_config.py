@@ -1,0 +1,125 @@
+"""Sweep files: strict validation, trial keys, the shipped sweeps."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cdr_bench.cli import CLIError
+from cdr_bench.scale.config import load_sweep
+
+from .helpers import REPO, tiny_sweep
+
+
+def _edit(path: Path, **changes) -> Path:
+    doc = yaml.safe_load(path.read_text())
+    for k, v in changes.items():
+        if v is None:
+            doc.pop(k, None)
+        else:
+            doc[k] = v
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+@pytest.mark.parametrize(
+    "changes, words",
+    [
+        ({"sedes": [1]}, ["tiny.yaml", "sedes", "unknown field"]),
+        ({"budget": {"total_step": 5}}, ["budget.total_step", "unknown field"]),
+        ({"evaluation": {"scenarios": ["low"], "episode": 3}}, ["evaluation.episode"]),
+        ({"grid": {"T-steps": [8]}}, ["grid.T-steps", "not a flag"]),
+        ({"grid": {"T": ["eight"]}}, ["invalid int value"]),
+        ({"fixed": {"seed": 3}}, ["fixed.seed", "set by the sweep"]),
+        ({"agent": "nope"}, ["agent", "unknown trainer"]),
+        ({"seeds": [1, 1]}, ["seeds", "twice"]),
+        ({"seeds": None}, ["seeds", "missing"]),
+        ({"evaluation": {"scenarios": ["no/such"]}}, ["evaluation.scenarios[0]"]),
+        ({"grid": {"T": [8]}, "settings": [{"T": 8}]}, ["only one of"]),
+    ],
+)
+def test_rejects_with_file_and_field(tmp_path, changes, words):
+    path = _edit(tiny_sweep(tmp_path, [1]), **changes)
+    with pytest.raises(CLIError) as e:
+        load_sweep(path)
+    msg = str(e.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg
+
+
+def test_trials_and_keys(tmp_path):
+    sweep = load_sweep(tiny_sweep(tmp_path, [1, 2], grid={"T": [8, 10], "polyak": [0.01]}))
+    assert [(t.label, t.seed) for t in sweep.trials] == [
+        ("T=8,polyak=0.01", 1),
+        ("T=8,polyak=0.01", 2),
+        ("T=10,polyak=0.01", 1),
+        ("T=10,polyak=0.01", 2),
+    ]
+    assert len({t.key for t in sweep.trials}) == 4
+    again = load_sweep(tiny_sweep(tmp_path, [2, 1], grid={"T": [8, 10], "polyak": [0.01]}))
+    assert {t.key for t in again.trials} == {t.key for t in sweep.trials}  # order-free keys
+    argv = sweep.trials[0].train_argv("RUN")
+    assert argv[:3] == ["diffusion-ac", "--run-dir", "RUN"]
+    assert "--no-curriculum" in argv and "--no-progress" in argv
+    assert argv[argv.index("--total-steps") + 1] == "120"
+
+
+def test_sensitivity_grid_is_fig7():
+    sweep = load_sweep(REPO / "sweeps" / "sensitivity.yaml")
+    by_factor: dict[str, set[str]] = {}
+    for t in sweep.trials:
+        by_factor.setdefault(t.factor, set()).add(t.label)
+    assert by_factor["default"] == {"default"}
+    # the centre value of each factor is the default trial, not a duplicate
+    assert by_factor["T"] | {"10"} == {"8", "10", "20", "40", "80"}
+    assert by_factor["temperature"] == {"0.1", "1", "5", "10"}
+    assert by_factor["polyak"] | {"0.005"} == {"0.001", "0.005", "0.01", "0.05"}
+    assert by_factor["critic-width"] | {"128"} == {"64", "128", "256", "512"}
+    seeds = {t.seed for t in sweep.trials}
+    assert len(seeds) == 5
+    assert len(sweep.trials) == 5 * (1 + 4 + 4 + 3 + 3)
+
+
+def test_smoke_sweep_dry_run():
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cdr_bench",
+            "sweep",
+            str(REPO / "sweeps" / "smoke.yaml"),
+            "--dry-run",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "4 trials" in r.stdout
+
+
+def test_cli_error_is_one_line(tmp_path):
+    path = _edit(tiny_sweep(tmp_path, [1]), bogus=1)
+    r = subprocess.run(
+        [sys.executable, "-m", "cdr_bench", "sweep", str(path)], capture_output=True, text=True
+    )
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0
+    assert "bogus" in r.stderr
+
+
+def test_core_package_does_not_import_ray():
+    code = (
+        "import sys, cdr_bench, cdr_bench.env, cdr_bench.evaluate.api, cdr_bench.scale.sweep, "
+        "cdr_bench.scale.config, cdr_bench.scale.ray_eval\n"
+        "from cdr_bench.cli import build_parser\n"
+        "build_parser()\n"
+        "assert 'ray' not in sys.modules, 'ray imported'\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
+    assert r.returncode == 0, r.stderr

@@ -1,0 +1,54 @@
+"""The RLlib adapter: RLlib's own env checker, the masking keys, a one-iteration PPO run."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ray.rllib")
+
+from cdr_bench.scale.rllib_env import CDRMultiAgentEnv  # noqa: E402
+
+from .helpers import REPO  # noqa: E402
+
+
+def test_spaces_for_every_agent_and_mask_key():
+    env = CDRMultiAgentEnv({"scenario": "marl/low-2"})
+    assert env.possible_agents == ["ownship_0", "intruder_0", "intruder_1"]
+    obs, infos = env.reset(seed=3)
+    assert set(obs) == set(env.possible_agents) == set(env.observation_spaces)
+    for a, o in obs.items():
+        assert set(o) == {"observations", "action_mask"}
+        assert o["action_mask"].dtype == np.float32
+        assert env.observation_spaces[a].contains(o)
+    # random masked play to the end: "__all__" only when every agent has left
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        acts = {a: int(rng.choice(np.flatnonzero(o["action_mask"]))) for a, o in obs.items()}
+        acts = {a: x for a, x in acts.items() if a in env.agents}
+        obs, rew, term, trunc, info = env.step(acts)
+        assert set(rew) == set(acts)
+        if term["__all__"] or trunc["__all__"]:
+            assert env.agents == []
+            break
+        obs = {a: o for a, o in obs.items() if a in env.agents}
+    else:
+        pytest.fail("episode did not end")
+
+
+def test_rllib_env_checker_accepts_it():
+    from ray.rllib.utils.pre_checks.env import check_multiagent_environments
+
+    check_multiagent_environments(CDRMultiAgentEnv({"scenario": "marl/low-2"}))
+
+
+@pytest.mark.slow
+def test_ppo_parameter_sharing_one_iteration():
+    spec = importlib.util.spec_from_file_location("ex", REPO / "examples" / "rllib_ppo_shared.py")
+    assert spec and spec.loader
+    ex = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ex)
+    rows = ex.train("marl/low-2", iterations=1, batch=128, minibatch=64)
+    assert rows[0]["env_steps"] and rows[0]["env_steps"] >= 128

@@ -1,0 +1,175 @@
+"""A sweep across a two-node Ray cluster on loopback survives the loss of a worker node."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("ray")
+
+from cdr_bench.scale.config import load_sweep  # noqa: E402
+from cdr_bench.scale.sweep import RESULT_FILE, TRIAL_FILE  # noqa: E402
+
+from .helpers import REPO, tiny_sweep  # noqa: E402
+
+RAY = str(Path(sys.executable).with_name("ray"))
+# detect a dead node within a few seconds instead of the default half minute
+FAST_HEALTH = {
+    "RAY_health_check_initial_delay_ms": "1000",
+    "RAY_health_check_period_ms": "1000",
+    "RAY_health_check_timeout_ms": "1000",
+    "RAY_health_check_failure_threshold": "3",
+    "RAY_USAGE_STATS_ENABLED": "0",
+}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _start(args: list[str], log: Path) -> subprocess.Popen:
+    """``ray start ... --block`` in its own process group (so the node can be killed whole)."""
+    return subprocess.Popen(
+        [RAY, "start", *args, "--block", "--disable-usage-stats"],
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        env={**os.environ, **FAST_HEALTH},
+        start_new_session=True,
+    )
+
+
+def _kill(p: subprocess.Popen) -> None:
+    try:
+        os.killpg(p.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    p.wait(timeout=30)
+
+
+def _wait_nodes(address: str, n: int, timeout_s: float = 90) -> None:
+    code = (
+        "import ray,sys; ray.init(address=sys.argv[1], logging_level='ERROR'); "
+        "print(sum(x['Alive'] for x in ray.nodes()))"
+    )
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        r = subprocess.run([sys.executable, "-c", code, address], capture_output=True, text=True)
+        if r.returncode == 0 and r.stdout.strip().splitlines()[-1:] == [str(n)]:
+            return
+        time.sleep(1)
+    raise TimeoutError(f"{n} Ray nodes did not come up at {address}")
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A head node (1 CPU) on loopback; ``add_worker()`` joins a second node (1 CPU).
+
+    Both nodes share this machine's IP, and a driver attaches to the raylet of a node with its
+    own IP, the newest one if several: the test starts the sweep's driver while the head is the
+    only node, so that it is the worker node, not the driver's own, that dies."""
+    temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")  # short: unix socket paths live here
+    port = _free_port()
+    address = f"127.0.0.1:{port}"
+    nodes: dict[str, subprocess.Popen] = {}
+
+    def add_worker() -> subprocess.Popen:
+        nodes["worker"] = _start(["--address", address, "--num-cpus", "1"], tmp_path / "worker.log")
+        return nodes["worker"]
+
+    try:
+        nodes["head"] = _start(
+            [
+                "--head",
+                "--port",
+                str(port),
+                "--num-cpus",
+                "1",
+                "--include-dashboard=false",
+                "--temp-dir",
+                temp,
+            ],
+            tmp_path / "head.log",
+        )
+        _wait_nodes(address, 1)
+        yield address, nodes, add_worker
+    finally:
+        for p in nodes.values():
+            _kill(p)
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def _wait_work_dirs(out: Path, n: int, driver: subprocess.Popen, timeout_s: float = 120) -> None:
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        work = out / ".work"
+        if work.is_dir() and len(list(work.iterdir())) >= n:
+            return
+        if driver.poll() is not None:
+            break
+        time.sleep(0.2)
+    driver.kill()
+    pytest.fail(f"{n} trials never ran at once:\n" + (driver.communicate()[0] or ""))
+
+
+@pytest.mark.slow
+def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
+    address, nodes, add_worker = cluster
+    sweep = load_sweep(tiny_sweep(tmp_path, [1, 2, 3, 4]))
+    out = tmp_path / "out"
+    env = {**os.environ, **FAST_HEALTH}
+    driver = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cdr_bench",
+            "sweep",
+            str(tmp_path / "tiny.yaml"),
+            "--out",
+            str(out),
+            "--address",
+            address,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    _wait_work_dirs(out, 1, driver)  # the driver is attached to the head
+    add_worker()
+    _wait_nodes(address, 2)
+    _wait_work_dirs(out, 2, driver)  # both nodes (1 CPU each) busy: the worker dies mid-trial
+    time.sleep(1)
+    running = {p.name for p in (out / ".work").iterdir()}
+    _kill(nodes["worker"])
+    stdout, _ = driver.communicate(timeout=240)
+    assert driver.returncode == 0, stdout
+
+    keys = sorted(t.key for t in sweep.trials)
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith("sweep.")) == keys
+    for k in keys:
+        rec = json.loads((out / k / TRIAL_FILE).read_text())
+        assert rec["key"] == k
+        res = json.loads((out / k / RESULT_FILE).read_text())
+        assert len(res["scenarios"]) == 1 and res["scenarios"][0]["episodes"] == 2
+        assert len((out / k / "result.jsonl").read_text().splitlines()) == 2
+    summary = json.loads((out / "sweep.json").read_text())
+    assert summary["failures"] == {} and all(t["done"] for t in summary["trials"])
+    # the attempt that died with the worker node did not land; a retry did
+    landed = {json.loads((out / k / TRIAL_FILE).read_text())["attempt"] for k in keys}
+    lost = running - landed
+    assert len(lost) == 1, (running, landed, stdout)
+    retried = next(iter(lost)).rsplit("-", 1)[0]
+    assert retried in keys
