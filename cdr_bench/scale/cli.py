@@ -29,6 +29,21 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--episodes", type=int, default=None, help="replace evaluation.episodes (reduced run)"
     )
+    p.add_argument("--seeds", default=None, help="replace seeds: comma-separated, e.g. 1,2")
+    p.add_argument(
+        "--scenario",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="replace evaluation.scenarios (repeatable)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FLAG=VALUE",
+        help="override a trainer flag of `fixed` (repeatable), e.g. --set learning-starts=500",
+    )
     p.add_argument("--dry-run", action="store_true", help="list the trials, run nothing")
     p.add_argument("--quiet", action="store_true", help="no per-trial lines")
     p.set_defaults(func=_sweep)
@@ -44,9 +59,31 @@ def register(sub: Any) -> None:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    import yaml
+
+    from cdr_bench.cli import CLIError
     from cdr_bench.scale.config import load_sweep
 
-    sweep = load_sweep(args.sweep, total_steps=args.total_steps, episodes=args.episodes)
+    overrides: dict[str, Any] = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CLIError(f"--set {item!r}: expected FLAG=VALUE")
+        overrides[key] = yaml.safe_load(value)
+    seeds = None
+    if args.seeds is not None:
+        try:
+            seeds = [int(x) for x in args.seeds.split(",")]
+        except ValueError:
+            raise CLIError(f"--seeds {args.seeds!r}: expected integers like 1,2,3") from None
+    sweep = load_sweep(
+        args.sweep,
+        total_steps=args.total_steps,
+        episodes=args.episodes,
+        overrides=overrides,
+        seeds=seeds,
+        scenarios=args.scenario,
+    )
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / sweep.name
     if args.dry_run:
         for t in sweep.trials:

@@ -180,12 +180,20 @@ def _values(source: Path, where: str, value: Any) -> list[Any]:
 
 
 def load_sweep(
-    path: str | Path, *, total_steps: int | None = None, episodes: int | None = None
+    path: str | Path,
+    *,
+    total_steps: int | None = None,
+    episodes: int | None = None,
+    overrides: dict[str, Any] | None = None,
+    seeds: list[int] | None = None,
+    scenarios: list[str] | None = None,
 ) -> Sweep:
     """Parse and validate a sweep file; the trials in a fixed order (setting-major, then seed).
 
-    ``total_steps`` / ``episodes`` replace ``budget.total_steps`` / ``evaluation.episodes``
-    (a reduced run of a big sweep; the trial keys change with them)."""
+    ``total_steps`` / ``episodes`` replace ``budget.total_steps`` / ``evaluation.episodes`` and
+    ``overrides`` (flag -> value) are merged into ``fixed``; ``seeds`` / ``scenarios`` replace
+    ``seeds`` / ``evaluation.scenarios``: a reduced run of a big sweep (the trial keys change
+    with them)."""
     source = Path(path)
     try:
         raw = yaml.safe_load(source.read_text(encoding="utf-8"))
@@ -216,7 +224,7 @@ def load_sweep(
     if not agent_file.is_file():
         raise _err(source, "agent_file", f"no such file {agent_file}")
 
-    seeds = _values(source, "seeds", raw["seeds"])
+    seeds = _values(source, "seeds", raw["seeds"] if seeds is None else seeds)
     for i, s in enumerate(seeds):
         _int(source, f"seeds[{i}]", s, 0)
     if len(set(seeds)) != len(seeds):
@@ -232,7 +240,7 @@ def load_sweep(
         if isinstance(m, bool) or not isinstance(m, (int, float)) or m < 0:
             raise _err(source, "budget.max_wall_minutes", f"expected a number >= 0, got {m!r}")
         base["max-wall-minutes"] = float(m)
-    fixed = _flag_dict(source, "fixed", raw.get("fixed", {}), known)
+    fixed = _flag_dict(source, "fixed", {**raw.get("fixed", {}), **(overrides or {})}, known)
 
     modes = [k for k in ("grid", "settings", "one_at_a_time") if k in raw]
     if len(modes) > 1:
@@ -267,7 +275,9 @@ def load_sweep(
                 points.append((factor, label, flags))
 
     ev = _mapping(source, "evaluation", raw["evaluation"], _EVAL_KEYS)
-    scen = _values(source, "evaluation.scenarios", ev.get("scenarios"))
+    scen = _values(
+        source, "evaluation.scenarios", ev.get("scenarios") if scenarios is None else scenarios
+    )
     for i, s in enumerate(scen):
         if not isinstance(s, str):
             raise _err(source, f"evaluation.scenarios[{i}]", f"expected a name, got {s!r}")

@@ -123,3 +123,23 @@ def test_core_package_does_not_import_ray():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 0, r.stderr
+
+
+def test_reduced_run_overrides(tmp_path):
+    path = tiny_sweep(tmp_path, [1, 2, 3])
+    base = load_sweep(path)
+    small = load_sweep(
+        path,
+        total_steps=50,
+        episodes=1,
+        overrides={"learning-starts": 10},
+        seeds=[7],
+        scenarios=["low"],
+    )
+    (t,) = small.trials
+    assert t.seed == 7 and t.train_flags["total-steps"] == 50
+    assert t.train_flags["learning-starts"] == 10
+    assert t.evaluation == {"scenarios": ["low"], "episodes": 1, "seed": 0}
+    assert t.key not in {b.key for b in base.trials}
+    with pytest.raises(CLIError, match="fixed.nope"):
+        load_sweep(path, overrides={"nope": 1})
