@@ -7,7 +7,7 @@
 # With no argument all three parts run. Outputs (all deterministic for a given checkpoint):
 #   eval/paper.json(.jsonl)                 checkpoint.pt on the paper suite (1000 episodes each)
 #   eval/ablation-<name>.json(.jsonl)       ablations/<name>.pt on the paper suite
-#   analysis/multimodal-<scenario>.json/.png, analysis/latency.json/.md
+#   analysis/multimodal-<scenario>.json/.png (also agents/ppo/analysis/), analysis/latency.json/.md
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 py=${PYTHON:-python}
@@ -26,10 +26,7 @@ for part in "${parts[@]}"; do
                     --out "$ag/eval/ablation-$name.json" --no-progress
             done ;;
         analysis)
-            for s in head-on crossing overtaking; do
-                "$py" -m cdr_bench multimodal $ag --scenario "tactical/$s" --samples 1000 \
-                    --out "$ag/analysis/multimodal-$s.json"
-            done
+            PYTHON=$py bash $ag/make_multimodal.sh  # Diffusion-AC (and PPO) on the tactical scenarios
             "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json > $ag/analysis/latency.md ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;
     esac

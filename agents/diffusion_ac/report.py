@@ -5,12 +5,17 @@ Sources: ``cdr-bench evaluate`` result JSONs under ``eval/`` (written by ``evalu
 under ``analysis/`` and the paper's Tables 2 and 3 as transcribed in ``leaderboard/published/``
 (shown as *published*, never mixed with ours).
 
-Run: python agents/diffusion_ac/report.py > /tmp/tables.md
+Run: python agents/diffusion_ac/report.py            (print the tables)
+     python agents/diffusion_ac/report.py --update   (rewrite them inside README.md)
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import re
+import sys
 from pathlib import Path
 
 import yaml
@@ -146,5 +151,17 @@ def main() -> None:
             )
 
 
+def update_readme() -> None:
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        main()
+    readme = HERE / "README.md"
+    pattern = re.compile(r"(<!-- report:start -->\n).*?(<!-- report:end -->)", re.S)
+    text = readme.read_text()
+    if not pattern.search(text):
+        raise SystemExit(f"{readme}: no <!-- report:start --> ... <!-- report:end --> block")
+    readme.write_text(pattern.sub(lambda m: m[1] + buf.getvalue() + "\n" + m[2], text))
+
+
 if __name__ == "__main__":
-    main()
+    update_readme() if "--update" in sys.argv[1:] else main()

@@ -77,16 +77,29 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("results", nargs="+", help="LABEL=result.json")
     p.add_argument("--published", action="append", default=[], help="LABEL=Table-2 row name")
     p.add_argument("--leaderboard-dir", default="leaderboard")
+    p.add_argument(
+        "--update",
+        metavar="FILE",
+        help="write the table between <!-- MARKER:start --> and <!-- MARKER:end --> in FILE",
+    )
+    p.add_argument("--marker", default="learned-agents")
     ns = p.parse_args(argv)
     pub = dict(x.split("=", 1) for x in ns.published)
-    print(HEADER)
+    lines = [HEADER]
     for item in ns.results:
         label, path = item.split("=", 1)
-        for line in rows_of(label, path):
-            print(line)
+        lines += rows_of(label, path)
         if label in pub:
-            for line in published_rows(label, pub[label], ns.leaderboard_dir):
-                print(line)
+            lines += published_rows(label, pub[label], ns.leaderboard_dir)
+    table = "\n".join(lines) + "\n"
+    if ns.update:
+        from cdr_bench.evaluate.report import update_marked_block
+        from cdr_bench.evaluate.results import atomic_write_text
+
+        f = Path(ns.update)
+        atomic_write_text(f, update_marked_block(f.read_text(), table, ns.marker))
+    else:
+        print(table, end="")
     return 0
 
 

@@ -194,27 +194,43 @@ def mode_summary(counts: list[int], threshold: float = 0.05) -> dict:
     }
 
 
-def heatmap(counts: list[int], title: str, out_png: str | os.PathLike[str]) -> None:
-    """Fig. 9 style: three 3x3 panels (descend / level / climb), heading x speed. Written
-    atomically (temporary file in the same folder, then ``os.replace``)."""
+def heatmap(
+    counts: list[int],
+    title: str,
+    out_png: str | os.PathLike[str],
+    all_counts: list[int] | None = None,
+) -> None:
+    """Fig. 9 style: three 3x3 panels (climb / level / descend), heading change x speed change,
+    of the successful first actions as shares of all samples; with ``all_counts`` a first row
+    shows every sampled first action. Written atomically (temporary file in the same folder,
+    then ``os.replace``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    c = np.asarray(counts, float).reshape(3, 3, 3)  # (psi, v, h)
-    tot = max(c.sum(), 1.0)
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.6))
-    for j, name in enumerate(("descend", "level", "climb")):
-        ax = axes[j]
-        m = c[:, :, j].T / tot  # rows: speed, cols: heading
-        im = ax.imshow(m, vmin=0, vmax=max(c.max() / tot, 1e-9), cmap="viridis", origin="lower")
-        ax.set_xticks(range(3), ["left", "hold", "right"])
-        ax.set_yticks(range(3), ["slower", "keep", "faster"])
-        ax.set_title(name)
-        for (r, k), v in np.ndenumerate(m):
-            ax.text(k, r, f"{v:.2f}", ha="center", va="center", color="w")
-    fig.colorbar(im, ax=axes, shrink=0.8, label="share of successful samples")
+    rows = [("successful first actions", counts)]
+    if all_counts is not None:
+        rows.insert(0, ("all sampled first actions", all_counts))
+    n = float(max(sum(all_counts if all_counts is not None else counts), 1))
+    fig, axes = plt.subplots(
+        len(rows), 3, figsize=(11, 3.4 * len(rows)), squeeze=False, layout="constrained"
+    )
+    for i, (label, cnt) in enumerate(rows):
+        c = np.asarray(cnt, float).reshape(3, 3, 3) / n  # (psi, v, h), share of all samples
+        vmax = max(float(c.max()), 1e-9)  # per row, so that rare successes stay visible
+        for j, (name, h) in enumerate((("climb", 2), ("level", 1), ("descend", 0))):
+            ax = axes[i, j]
+            m = c[:, :, h].T  # rows: speed, cols: heading
+            im = ax.imshow(m, vmin=0, vmax=vmax, cmap="viridis", origin="lower")
+            ax.set_xticks(range(3), ["left", "hold", "right"])
+            ax.set_yticks(range(3), ["slower", "keep", "faster"])
+            ax.set_title(f"{name}: {label}, {100 * m.sum():.1f} %", fontsize=9)
+            for (r, k), v in np.ndenumerate(m):
+                ax.text(
+                    k, r, f"{v:.2f}", ha="center", va="center", color="w" if v < vmax / 2 else "k"
+                )
+        fig.colorbar(im, ax=axes[i, :].tolist(), shrink=0.8, label="share of all samples")
     fig.suptitle(title)
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -270,7 +286,11 @@ def cmd_multimodal(ns: argparse.Namespace) -> int:
         out = Path(ns.out)
         # PNG first, JSON last: a JSON file means the run finished and its picture is there.
         heatmap(
-            d["success"], f"{Path(str(ns.agent)).name} on {ns.scenario}", out.with_suffix(".png")
+            d["success"],
+            f"{Path(str(ns.agent)).name} on {ns.scenario}: {ns.samples} samples, "
+            f"follow-on success {100 * d['success_rate']:.1f} %",
+            out.with_suffix(".png"),
+            all_counts=d["all"],
         )
         atomic_write_text(out, json.dumps(res, indent=1) + "\n")
     return 0
