@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from cdr_bench.actions import N_ACTIONS
+from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import (
     OUTCOME_NAMES,
@@ -212,6 +212,7 @@ class CDREnv(ParallelEnv):
         big = np.float32(1e4)
         self.state_space = spaces.Box(-big, big, (M * _STATE_AC + B * _STATE_BG,), np.float32)
         self._bg_ids = [f"bg_{b}" for b in range(B)]
+        self._hold_actions = np.full((1, M), HOLD, dtype=np.int64)
         self._seed_stream = np.random.default_rng()
         self._trail: list[NDArray[np.float64]] = []
         self._last_result: StepResult | None = None
@@ -254,25 +255,27 @@ class CDREnv(ParallelEnv):
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
-        act = np.full((1, self.sim.M), 13, dtype=np.int64)
+        sim = self.sim
+        act = self._hold_actions.copy()
         for agent in self.agents:
             if agent not in actions:
                 raise ValueError(f"missing action for live agent {agent!r}")
             act[0, self._index[agent]] = _check_action(agent, actions[agent])
         acting = list(self.agents)
-        res = self.sim.step(act)
+        res = sim.step(act)
         self._last_result = res
-        self._trail.append(self.sim.ac_pos_km[0, 0].copy())
+        self._trail.append(sim.pos_km[0, sim.B].copy())  # the ownship
         obs = self._observations(acting)
         rewards, terms, truncs, infos = {}, {}, {}, {}
+        step = sim.steps.item(0)
         for agent in acting:
             m = self._index[agent]
             rt = {k: float(v[0, m]) for k, v in res.rewards.items()}
             g = sum(rt[k] for k in GOAL_TERMS)
             s = sum(rt[k] for k in SAFETY_TERMS)
             rewards[agent] = g + s
-            terms[agent] = bool(res.terminated[0, m])
-            truncs[agent] = bool(res.truncated[0, m])
+            terms[agent] = res.terminated.item(0, m)
+            truncs[agent] = res.truncated.item(0, m)
             info: dict[str, Any] = {
                 "reward_terms": rt,
                 "goal_reward": g,
@@ -281,13 +284,13 @@ class CDREnv(ParallelEnv):
                 if rt["los"]
                 else [],
                 "nmac_with": self._partners(res.nmac_with[0, m]) if rt["nmac"] else [],
-                "invalid_action": bool(res.invalid_action[0, m]),
-                "outside": bool(res.outside[0, m]),
-                "min_separation_km": float(res.min_sep_km[0, m]),
-                "step": int(self.sim.steps[0]),
+                "invalid_action": res.invalid_action.item(0, m),
+                "outside": res.outside.item(0, m),
+                "min_separation_km": res.min_sep_km.item(0, m),
+                "step": step,
             }
             if terms[agent] or truncs[agent]:
-                info["outcome"] = OUTCOME_NAMES[int(res.outcome[0, m])]
+                info["outcome"] = OUTCOME_NAMES[res.outcome.item(0, m)]
             infos[agent] = info
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.render_mode == "human":
@@ -352,6 +355,8 @@ class CDREnv(ParallelEnv):
 
 def _check_action(agent: str, value: Any) -> int:
     """An integer action in 0..26, or ValueError naming the agent and the value."""
+    if type(value) is int and 0 <= value < N_ACTIONS:  # the common case, checked first
+        return value
     v = value
     if isinstance(v, np.ndarray) and v.size == 1:
         v = v.reshape(()).item() if np.issubdtype(v.dtype, np.integer) else v.reshape(())[()]

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.actions import TRIPLES
+from cdr_bench.actions import TRIPLES, action_mask
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim.geometry import bearing_deg, heading_to_unit
 from cdr_bench.sim.units import KM_PER_S_PER_KT
@@ -42,6 +42,8 @@ OUTCOME_NAMES = {
     BOUNDARY: "boundary",
     TIMEOUT: "timeout",
 }
+
+_OUTCOME_CODES = [np.int8(c) for c in range(6)]  # as int8 scalars, so np.where keeps int8
 
 REWARD_TERMS = ("goal", "path", "boundary", "step", "timeout", "los", "nmac")
 """Named reward terms. The goal part R_G sums the first five, the safety part R_S the last two."""
@@ -140,6 +142,28 @@ class Simulator:
         not_self[np.arange(M), B + np.arange(M)] = False
         self._not_self = not_self[None]  # (1, M, N): a controlled aircraft is not its own neighbour
         self._route_len_slot = self.route_length_km[self.slot_route]  # (R*C,)
+
+        # Cached for speed: at E = 1 numpy's per-call overhead, not arithmetic, is the cost of a
+        # step, so constant work is done once here. Positions and velocities as complex
+        # numbers (east = real, north = imag): views into pos_km / vel_km_s.
+        self._pc = self.pos_km.view(np.complex128)[..., 0]  # (E, N)
+        self._vc = self.vel_km_s.view(np.complex128)[..., 0]
+        self._goal_c = self.ac_goal_km.view(np.complex128)[..., 0]  # (E, M)
+        self._ac_active = self.active[:, B:]
+        # Per action index: heading change (deg), speed change (kt); per (level, action): the
+        # level after the action and whether the level change is infeasible (not executed).
+        self._turn_deg = self.heading_step_deg * TRIPLES[:, 0]
+        self._speed_change_kt = self.speed_step_kt * TRIPLES[:, 1]
+        lv = np.arange(N_LEVELS)[:, None]
+        target = lv + TRIPLES[None, :, 2]
+        self._level_change_invalid = (target < 0) | (target >= N_LEVELS)  # (levels, 27)
+        self._level_after = np.where(self._level_change_invalid, lv, target)
+        self._traffic_step_km = self.traffic_speed_km_s * self.dt_s
+        self._route_vel_km_s = self.route_unit * self.traffic_speed_km_s  # (R, 2)
+        # Flat offsets of row (e, m) in (E, M, N) arrays and of episode e in (E, N) arrays, for
+        # gathering per-row neighbours with .take instead of three-array fancy indexing.
+        self._pair_offset = (np.arange(E * M) * N).reshape(E, M, 1)
+        self._episode_offset = (np.arange(E) * N).reshape(E, 1, 1)
 
     # Views of the combined arrays (in-place writes go through to them).
     bg_pos_km = property(lambda self: self.pos_km[:, : self.B], doc="(E, B, 2) km")
@@ -300,8 +324,9 @@ class Simulator:
     def _set_controlled_velocity(self) -> None:
         # heading h clockwise from north: (east, north) = (sin h, cos h) = Re/Im of e^{i(90°-h)}
         ang = np.deg2rad(90.0 - self.ac_heading_deg)
-        vc = self.vel_km_s.view(np.complex128)[..., 0]
-        vc[:, self.B :] = np.exp(1j * ang) * (self.ac_speed_kt * KM_PER_S_PER_KT * self.ac_active)
+        self._vc[:, self.B :] = np.exp(1j * ang) * (
+            self.ac_speed_kt * KM_PER_S_PER_KT * self._ac_active
+        )
 
     def step(self, actions: NDArray[np.integer]) -> StepResult:
         """Advance every episode by one step.
@@ -311,43 +336,43 @@ class Simulator:
                 are ignored. Validation of the values is the caller's job.
         """
         cfg, dt, B = self.config, self.dt_s, self.B
-        acting = self.ac_active.copy()
-        live = acting.any(axis=1)  # (E,)
-        trip = TRIPLES[np.where(acting, np.asarray(actions).reshape(self.E, self.M), 13)]
+        acting = self._ac_active.copy()
+        live = np.logical_or.reduce(acting, axis=1)  # (E,)
+        # Aircraft that are not flying hold (index 13), which is never an invalid level change.
+        act = np.where(acting, np.asarray(actions).reshape(self.E, self.M), 13)
 
         # 1. Apply the action at the start of the step (heading, clipped speed, target level).
-        old_level = self.ac_level.copy()
-        target = old_level + trip[..., 2]
-        invalid = acting & ((target < 0) | (target >= N_LEVELS))
-        new_level = np.where(invalid, old_level, target)
-        self.ac_heading_deg = (self.ac_heading_deg + self.heading_step_deg * trip[..., 0]) % 360.0
+        old_level = self.level[:, B:]
+        invalid = self._level_change_invalid[old_level, act]
+        new_level = self._level_after[old_level, act]
+        self.ac_heading_deg = (self.ac_heading_deg + self._turn_deg[act]) % 360.0
         self.ac_speed_kt = np.minimum(
-            np.maximum(self.ac_speed_kt + self.speed_step_kt * trip[..., 1], self.min_speed_kt),
+            np.maximum(self.ac_speed_kt + self._speed_change_kt[act], self.min_speed_kt),
             self.max_speed_kt,
         )
         self._set_controlled_velocity()
 
         # 2. Swept separation: closest approach over [0, dt] of every controlled aircraft
         #    against every other aircraft, complex numbers as 2-D vectors.
-        pc = self.pos_km.view(np.complex128)[..., 0]  # (E, N)
-        vc = self.vel_km_s.view(np.complex128)[..., 0]
+        pc, vc = self._pc, self._vc  # (E, N)
         rp = pc[:, None, :] - pc[:, B:, None]  # (E, M, N)
         rv = vc[:, None, :] - vc[:, B:, None]
         t = -(rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
         d_min = np.abs(rp + rv * np.minimum(np.maximum(t, 0.0), dt))
         occ = 1 << self.level
         occ[:, B:] |= 1 << new_level  # a level change occupies both levels for the step
-        judged = ((occ[:, B:, None] & occ[:, None, :]) != 0) & self.active[:, None, :]
+        judged = (occ[:, B:, None] & occ[:, None, :]) != 0
+        judged &= self.active[:, None, :]
         judged &= self._not_self
         judged &= acting[:, :, None]
         d_judged = np.where(judged, d_min, np.inf)
         nmac_with = d_judged < self.nmac_km
         los_with = d_judged < self.los_km
-        n_nmac = nmac_with.sum(axis=2)
-        n_los_only = los_with.sum(axis=2) - n_nmac
+        n_nmac = np.add.reduce(nmac_with, axis=2)
+        n_los = np.add.reduce(los_with, axis=2)  # NMAC distance < LoS distance: includes NMACs
 
         # 3. Swept goal test (the goal is a fixed point).
-        gc = self.ac_goal_km.view(np.complex128)[..., 0] - pc[:, B:]
+        gc = self._goal_c - pc[:, B:]
         va = vc[:, B:]
         tg = np.minimum(np.maximum((gc * va.conj()).real / (np.abs(va) ** 2 + 1e-300), 0.0), dt)
         reached = acting & (np.abs(gc - va * tg) < cfg.ownship.goal_radius_km)
@@ -358,20 +383,25 @@ class Simulator:
         self.steps += live
         self._advance_traffic(live)
 
-        # 5. Outcomes (priority nmac > los > boundary > success) and named rewards.
+        # 5. Outcomes (priority nmac > los > boundary > success) and named rewards. Every
+        #    condition below is already False for aircraft that were not acting.
         size = self.size_km
         p = self.pos_km[:, B:]
-        outside = acting & ((p < 0.0) | (p > size)).any(axis=2)
-        outcome = np.where(reached, SUCCESS, RUNNING).astype(np.int8)
+        outside = acting & np.logical_or.reduce((p < 0.0) | (p > size), axis=2)
+        code = _OUTCOME_CODES
+        outcome = np.where(reached, code[SUCCESS], code[RUNNING])
         if cfg.sector.boundary_terminates:
-            outcome[outside] = BOUNDARY
+            outcome = np.where(outside, code[BOUNDARY], outcome)
         if cfg.separation.los_terminates:
-            outcome[n_los_only + n_nmac > 0] = LOS
-        outcome[n_nmac > 0] = NMAC
-        outcome[~acting] = RUNNING
+            outcome = np.where(n_los > 0, code[LOS], outcome)
+        outcome = np.where(n_nmac > 0, code[NMAC], outcome)
         terminated = outcome != RUNNING
-        truncated = acting & ~terminated & (self.steps >= self.max_steps)[:, None]
-        outcome[truncated] = TIMEOUT
+        at_horizon = self.steps >= self.max_steps  # (E,)
+        if np.count_nonzero(at_horizon):
+            truncated = acting & ~terminated & at_horizon[:, None]
+            outcome[truncated] = TIMEOUT
+        else:
+            truncated = np.zeros_like(terminated)
 
         w = cfg.reward
         d_goal = np.abs(gc - va * dt)
@@ -381,14 +411,15 @@ class Simulator:
             "boundary": -w.boundary * outside,
             "step": -w.step * acting,
             "timeout": -w.timeout * truncated,
-            "los": -w.los * n_los_only,
+            "los": -w.los * (n_los - n_nmac),
             "nmac": -w.nmac * n_nmac,
         }
 
         finished = terminated | truncated
-        self.ac_outcome[finished] = outcome[finished]
-        self.active[:, B:] = acting & ~finished
-        vc[:, B:] *= self.ac_active  # aircraft that left stop moving
+        if np.count_nonzero(finished):
+            np.copyto(self.ac_outcome, outcome, where=finished)
+            self._ac_active[...] = acting & ~finished
+        vc[:, B:] *= self._ac_active  # aircraft that left stop moving
         return StepResult(
             acting=acting,
             rewards=rewards,
@@ -400,7 +431,7 @@ class Simulator:
             terminated=terminated,
             truncated=truncated,
             outcome=outcome,
-            min_sep_km=d_judged.min(axis=2, initial=np.inf),
+            min_sep_km=np.minimum.reduce(d_judged, axis=2, initial=np.inf),
         )
 
     def _advance_traffic(self, live: NDArray[np.bool_]) -> None:
@@ -412,51 +443,47 @@ class Simulator:
             self.active[:, R * C : B] &= ~outside
         if not R:
             return
-        step_km = self.traffic_speed_km_s * self.dt_s
+        step_km = self._traffic_step_km
         self.bg_arc_km += step_km
         arr = self.active[:, : R * C]
         arr &= self.bg_arc_km < self._route_len_slot
 
         self.route_last_arc_km += step_km * live[:, None]
         due = (self.route_last_arc_km >= self.route_spacing_km) & live[:, None]
-        if not due.any():
+        if not np.count_nonzero(due):
             return
         arc = np.where(self.route_waiting, 0.0, self.route_last_arc_km - self.route_spacing_km)
         level = self.route_spawn_count % N_LEVELS
         pos = self.route_start_km + arc[..., None] * self.route_unit  # (E, R, 2)
         pc = pos.view(np.complex128)[..., 0]  # (E, R)
-        d = np.abs(pc[:, :, None] - self.pos_km.view(np.complex128)[:, None, self.B :, 0])
-        near = (
-            (d < self.config.traffic.spawn_clearance_km)
-            & self.ac_active[:, None, :]
-            & (self.ac_level[:, None, :] == level[..., None])
-        )
-        blocked = near.any(axis=2)
+        d = np.abs(pc[:, :, None] - self._pc[:, None, B:])
+        near = d < self.config.traffic.spawn_clearance_km
+        near &= self._ac_active[:, None, :]
+        near &= self.level[:, None, B:] == level[..., None]
+        blocked = np.logical_or.reduce(near, axis=2)
         spawn = due & ~blocked
         self.route_waiting = due & blocked
-        if not spawn.any():
+        if not np.count_nonzero(spawn):
             return
         e_idx, r_idx = np.nonzero(spawn)
         free = np.argmin(arr.reshape(self.E, R, C)[e_idx, r_idx], axis=1)
         slot = r_idx * C + free
-        if arr[e_idx, slot].any():  # pragma: no cover - capacity is n + 2 by construction
+        if np.count_nonzero(arr[e_idx, slot]):  # pragma: no cover - capacity n + 2 suffices
             raise RuntimeError("airway slot capacity exceeded")
         self.active[e_idx, slot] = True
         self.bg_arc_km[e_idx, slot] = arc[e_idx, r_idx]
         self.pos_km[e_idx, slot] = pos[e_idx, r_idx]
-        self.vel_km_s[e_idx, slot] = self.route_unit[r_idx] * self.traffic_speed_km_s
+        self.vel_km_s[e_idx, slot] = self._route_vel_km_s[r_idx]
         self.level[e_idx, slot] = level[e_idx, r_idx]
-        self.route_last_arc_km[e_idx, r_idx] = arc[e_idx, r_idx]
-        self.route_spawn_count[e_idx, r_idx] += 1
+        np.copyto(self.route_last_arc_km, arc, where=spawn)
+        self.route_spawn_count += spawn
 
     # ------------------------------------------------------------------------------------------
     # Derived quantities
 
     def action_masks(self) -> NDArray[np.int8]:
         """(E, M, 27) feasibility flags of every controlled aircraft."""
-        from cdr_bench.actions import action_mask
-
-        return action_mask(self.ac_level, N_LEVELS)
+        return action_mask(self.level[:, self.B :], N_LEVELS)
 
     def intruder_count(self) -> NDArray[np.int64]:
         """Active background aircraft per episode, (E,)."""

@@ -103,22 +103,21 @@ def observe(sim: Simulator) -> NDArray[np.float32]:
     E, M, B = sim.E, sim.M, sim.B
     out = np.zeros((E, M, 12 + 10 * K))
 
-    # Own state and goal; complex numbers as 2-D vectors (east = real, north = imag).
-    pc = sim.pos_km.view(np.complex128)[..., 0]  # (E, N)
-    vc = sim.vel_km_s.view(np.complex128)[..., 0]
+    # Own state and goal; complex numbers as 2-D vectors (east = real, north = imag), written
+    # as (x, y) pairs where two features are the two components of one vector.
+    pc, vc = sim._pc, sim._vc  # (E, N)
     own = pc[:, B:]
-    out[..., 0] = own.real * (2.0 / size) - 1.0
-    out[..., 1] = own.imag * (2.0 / size) - 1.0
+    out[..., 0:2] = sim.pos_km[:, B:] * (2.0 / size) - 1.0
     h = np.deg2rad(sim.ac_heading_deg)
     out[..., 2] = np.sin(h)
     out[..., 3] = np.cos(h)
     mid = 0.5 * (sim.min_speed_kt + sim.max_speed_kt)
     half = max(0.5 * (sim.max_speed_kt - sim.min_speed_kt), 1e-9)
     out[..., 4] = (sim.ac_speed_kt - mid) / half
-    out[..., 5] = sim.ac_level - 1.0
-    g = sim.ac_goal_km.view(np.complex128)[..., 0] - own
-    out[..., 6] = g.real / size
-    out[..., 7] = g.imag / size
+    out[..., 5] = sim.level[:, B:] - 1.0
+    g_xy = sim.ac_goal_km - sim.pos_km[:, B:]  # (E, M, 2)
+    out[..., 6:8] = g_xy / size
+    g = g_xy.view(np.complex128)[..., 0]
     gd = np.abs(g)
     out[..., 8] = gd / size
     # Goal direction relative to the heading: rotate by e^{i(h - 90°)}; for a goal to the right
@@ -133,28 +132,27 @@ def observe(sim: Simulator) -> NDArray[np.float32]:
     dist = np.where(sim.active[:, None, :] & sim._not_self, np.abs(rp), np.inf)
     near = np.argsort(dist, axis=-1)[..., :K]  # (E, M, k)
     kk = near.shape[-1]
-    ei = np.arange(E)[:, None, None]
-    mi = np.arange(M)[None, :, None]
-    nd = dist[ei, mi, near]
-    present = nd < np.inf
-    nrel = rp[ei, mi, near]
-    nvel = vc[ei, near] - vc[:, B:, None]
-    nlvl = (sim.level[ei, near] - sim.ac_level[:, :, None]).astype(float)
+    pair = near + sim._pair_offset  # flat index into (E, M, N)
+    other = near + sim._episode_offset  # flat index into (E, N)
+    nd = dist.take(pair)
+    nrel = rp.take(pair)
+    nvel = vc.take(other) - vc[:, B:, None]
+    nlvl = (sim.level.take(other) - sim.level[:, B:, None]).astype(float)
     look = cfg.observation.lookahead_s
     t = np.minimum(np.maximum(-(nrel * nvel.conj()).real / (np.abs(nvel) ** 2 + 1e-300), 0.0), look)
     d_cpa = np.abs(nrel + nvel * t)
     nb = out[..., 12 : 12 + 10 * kk].reshape(E, M, kk, 10)
     nb[..., 0] = 1.0
-    nb[..., 1] = nrel.real / rng_km
-    nb[..., 2] = nrel.imag / rng_km
-    nb[..., 3] = nvel.real / _VEL_SCALE_KM_S
-    nb[..., 4] = nvel.imag / _VEL_SCALE_KM_S
+    nb[..., 1:3] = nrel.view(np.float64).reshape(E, M, kk, 2) / rng_km
+    nb[..., 3:5] = nvel.view(np.float64).reshape(E, M, kk, 2) / _VEL_SCALE_KM_S
     nb[..., 5] = nlvl / 2.0
     nb[..., 6] = nd / rng_km
     nb[..., 7] = t / look
     nb[..., 8] = d_cpa / rng_km
     nb[..., 9] = (nlvl == 0) & (d_cpa < sim.los_km)
-    nb[~present] = 0.0
+    absent = nd == np.inf
+    if np.count_nonzero(absent):
+        nb[absent] = 0.0
     low, high = _bounds(cfg)
     return np.minimum(np.maximum(out, low, out=out), high, out=out).astype(np.float32)
 
