@@ -12,7 +12,8 @@ makes the remaining calls cheap:
 * LayerNorm affine parameters are folded into the linear layer that follows them;
 * attention over the three tokens is summed over the query axis before the output projection
   (the denoiser sums its tokens, and the projection is linear);
-* every remaining operation is a numpy call on float32 arrays (~1 us each at batch 1).
+* every remaining operation is a numpy call on float32 arrays (~1 us each at batch 1); means
+  are ``np.add.reduce`` times 1/n, since ``ndarray.mean`` alone costs ~10 us per call.
 
 The noise is drawn from the caller's ``torch.Generator`` in exactly the order of
 :meth:`Policy.clean_logits` (y_T, then one z per step t = T..2), so both paths follow the same
@@ -36,10 +37,14 @@ def _np(t: torch.Tensor) -> np.ndarray:
 
 
 def _normalise(x: np.ndarray) -> np.ndarray:
-    """LayerNorm without its affine part (folded into the next linear layer)."""
-    mu = x.mean(-1, keepdims=True)
-    d = x - mu
-    return d / np.sqrt((d * d).mean(-1, keepdims=True) + _LN_EPS)
+    """LayerNorm without its affine part (folded into the next linear layer).
+
+    ``np.add.reduce(...) * (1 / n)`` instead of ``mean``: the same pairwise sum, ~5x less call
+    overhead (``mean`` goes through Python wrappers), and for power-of-two widths bit-identical
+    (multiplying by 1/n is exact)."""
+    inv_n = 1.0 / x.shape[-1]
+    d = x - np.add.reduce(x, axis=-1, keepdims=True) * inv_n
+    return d / np.sqrt(np.add.reduce(d * d, axis=-1, keepdims=True) * inv_n + _LN_EPS)
 
 
 def _mish(x: np.ndarray) -> np.ndarray:
