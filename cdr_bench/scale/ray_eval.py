@@ -37,7 +37,9 @@ def run_tasks_on_ray(
     try:
         pending = [remote.remote(*t) for t in tasks]
         while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
+            ready, pending = ray.wait(pending, num_returns=1, timeout=1.0)
+            if not ready:  # a timeout, so that Ctrl-C is seen between waits
+                continue
             try:
                 yield ray.get(ready[0])
             except ray.exceptions.RayTaskError as e:

@@ -224,7 +224,10 @@ def _run_on_ray(
     n = 0
     try:
         while refs:
-            ready, _ = ray.wait(list(refs), num_returns=1)
+            # a timeout, so that Ctrl-C is seen between waits
+            ready, _ = ray.wait(list(refs), num_returns=1, timeout=1.0)
+            if not ready:
+                continue
             t = refs.pop(ready[0])
             n += 1
             try:
