@@ -58,14 +58,22 @@ def train(
     batch: int = 256,
     minibatch: int = 64,
     seed: int = 0,
+    logdir: str = "runs/rllib-ppo-shared",
 ) -> list[dict[str, Any]]:
-    """Run PPO; return one summary per iteration."""
+    """Run PPO (RLlib's result logs in ``logdir``, not ~/ray_results); return one summary per
+    iteration."""
+    from pathlib import Path
+
     import ray
+    from ray.tune.logger import UnifiedLogger
 
     started = not ray.is_initialized()
     if started:
         ray.init(num_cpus=1, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
-    algo = build_config(scenario, batch, minibatch, seed).build_algo()
+    Path(logdir).mkdir(parents=True, exist_ok=True)
+    algo = build_config(scenario, batch, minibatch, seed).build_algo(
+        logger_creator=lambda cfg: UnifiedLogger(cfg, logdir, loggers=None)
+    )
     rows = []
     try:
         for i in range(iterations):
@@ -95,5 +103,6 @@ if __name__ == "__main__":
     p.add_argument("--batch", type=int, default=2000, help="env steps per iteration")
     p.add_argument("--minibatch", type=int, default=128)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--logdir", default="runs/rllib-ppo-shared", help="RLlib's result logs")
     a = p.parse_args()
-    train(a.scenario, a.iterations, a.batch, a.minibatch, a.seed)
+    train(a.scenario, a.iterations, a.batch, a.minibatch, a.seed, a.logdir)

@@ -45,10 +45,11 @@ def test_rllib_env_checker_accepts_it():
 
 
 @pytest.mark.slow
-def test_ppo_parameter_sharing_one_iteration():
+def test_ppo_parameter_sharing_one_iteration(tmp_path):
     spec = importlib.util.spec_from_file_location("ex", REPO / "examples" / "rllib_ppo_shared.py")
     assert spec and spec.loader
     ex = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ex)
-    rows = ex.train("marl/low-2", iterations=1, batch=128, minibatch=64)
+    rows = ex.train("marl/low-2", iterations=1, batch=128, minibatch=64, logdir=str(tmp_path))
     assert rows[0]["env_steps"] and rows[0]["env_steps"] >= 128
+    assert (tmp_path / "result.json").is_file()

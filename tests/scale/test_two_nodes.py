@@ -173,3 +173,27 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
     assert len(lost) == 1, (running, landed, stdout)
     retried = next(iter(lost)).rsplit("-", 1)[0]
     assert retried in keys
+
+    # the surviving cluster also serves `evaluate --backend ray --address`, same JSONL as local
+    agent = str(REPO / "agents" / "random" / "agent.py")
+    common = ["--scenario", "tactical/head-on", "--episodes", "4", "--batch-size", "2"]
+    for name, extra in (("local", []), ("ray", ["--backend", "ray", "--address", address])):
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "cdr_bench",
+                "evaluate",
+                agent,
+                *common,
+                *extra,
+                "--out",
+                str(tmp_path / f"{name}.json"),
+                "--no-progress",
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+        )
+        assert r.returncode == 0, r.stderr
+    assert (tmp_path / "local.jsonl").read_bytes() == (tmp_path / "ray.jsonl").read_bytes()
