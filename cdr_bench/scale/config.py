@@ -11,7 +11,7 @@ A sweep file (``sweeps/smoke.yaml`` is the smallest complete example)::
     grid: {T: [8, 10]}               # one of: grid (cartesian product), settings (a list of
                                      #   flag dicts) or one_at_a_time (vary one factor around
                                      #   ``fixed``; a value may be a dict setting several flags)
-    evaluation: {scenarios: [tactical/head-on], episodes: 4, seed: 0}
+    evaluation: {scenarios: [tactical/head-on], episodes: 4, seed: 0}   # names or YAML paths
     max_retries: 3                   # re-runs of a trial whose worker or node died
     num_cpus_per_trial: 1
 
@@ -240,7 +240,8 @@ def load_sweep(
         if isinstance(m, bool) or not isinstance(m, (int, float)) or m < 0:
             raise _err(source, "budget.max_wall_minutes", f"expected a number >= 0, got {m!r}")
         base["max-wall-minutes"] = float(m)
-    fixed = _flag_dict(source, "fixed", {**raw.get("fixed", {}), **(overrides or {})}, known)
+    fixed_raw = _mapping(source, "fixed", raw.get("fixed") or {}, None)
+    fixed = _flag_dict(source, "fixed", {**fixed_raw, **(overrides or {})}, known)
 
     modes = [k for k in ("grid", "settings", "one_at_a_time") if k in raw]
     if len(modes) > 1:
@@ -283,9 +284,12 @@ def load_sweep(
             raise _err(source, f"evaluation.scenarios[{i}]", f"expected a name, got {s!r}")
     from cdr_bench.scenarios import ScenarioError, load_scenario
 
-    for i, s in enumerate(scen):
+    scen = list(scen)
+    for i, name_i in enumerate(scen):
+        if name_i.endswith((".yaml", ".yml")) and not Path(name_i).is_absolute():
+            scen[i] = str((source.parent / name_i).resolve())  # relative to the sweep file
         try:
-            load_scenario(s)
+            load_scenario(scen[i])
         except ScenarioError as e:
             raise _err(source, f"evaluation.scenarios[{i}]", str(e)) from None
     evaluation = {

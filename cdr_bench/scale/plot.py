@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from cdr_bench.cli import CLIError
 
@@ -56,10 +55,10 @@ def collect(sweep_dir: Path) -> dict[str, Any]:
         trials.append((rec, trial_metrics(res)))
     if not trials:
         raise CLIError(f"{sweep_dir}: no finished trials (*/trial.json)")
-    fixed: dict[str, Any] = {}
-    sy = sweep_dir / "sweep.yaml"
-    if sy.is_file():
-        fixed = (yaml.safe_load(sy.read_text()) or {}).get("fixed", {}) or {}
+    # the centre point's value of each factor: the flags its "default" trials were trained with
+    fixed: dict[str, Any] = next(
+        (r["train_flags"] for r, _ in trials if r["factor"] == "default"), {}
+    )
     factors = sorted({r["factor"] for r, _ in trials if r["factor"] != "default"}) or ["default"]
     data: dict[str, dict[str, dict[str, list[float]]]] = {f: {} for f in factors}
     defaults = {f: str(fixed[f]) if f in fixed else "default" for f in factors}

@@ -19,6 +19,10 @@ Fault tolerance without a scheduler of our own:
 - ``--resume`` skips every trial whose folder exists; work folders of dead attempts are
   garbage and removed at the end of the sweep.
 
+On a cluster of several machines ``--out``, the agent file and the Python environment must be
+at the same paths on every node (a shared file system), as for any Ray job without a
+runtime environment.
+
 Ray is imported here only, lazily, and only by ``cdr-bench sweep``; the rest of the package
 never imports it.
 """
@@ -143,6 +147,7 @@ def run_sweep(
     resume: bool = False,
     num_cpus: int | None = None,
     progress: bool = True,
+    command: list[str] | None = None,
 ) -> dict[str, Any]:
     """Run every unfinished trial of ``sweep`` on Ray; write ``<out>/sweep.json``.
 
@@ -174,12 +179,14 @@ def run_sweep(
         "name": sweep.name,
         "sweep_file": str(sweep.source),
         "agent": sweep.agent,
+        "command": ["cdr-bench", *sys.argv[1:]] if command is None else command,
         "trials": [
             {
                 "key": t.key,
                 "factor": t.factor,
                 "label": t.label,
                 "seed": t.seed,
+                "train_flags": t.train_flags,
                 "done": trial_done(out, t),
             }
             for t in sweep.trials

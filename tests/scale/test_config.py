@@ -143,3 +143,22 @@ def test_reduced_run_overrides(tmp_path):
     assert t.key not in {b.key for b in base.trials}
     with pytest.raises(CLIError, match="fixed.nope"):
         load_sweep(path, overrides={"nope": 1})
+
+
+def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "cdr_bench", "scenarios", "show", "low"],
+        capture_output=True,
+        text=True,
+    )
+    (tmp_path / "scen").mkdir()
+    (tmp_path / "scen" / "mine.yaml").write_text(r.stdout)
+    path = _edit(
+        tiny_sweep(tmp_path, [1]),
+        evaluation={"scenarios": ["scen/mine.yaml"], "episodes": 1},
+        fixed={},
+    )
+    (t,) = load_sweep(path).trials
+    assert t.evaluation["scenarios"] == [str((tmp_path / "scen" / "mine.yaml").resolve())]
+    with pytest.raises(CLIError, match="fixed: expected a mapping"):
+        load_sweep(_edit(path, fixed=[1]))
