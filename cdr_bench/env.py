@@ -11,18 +11,19 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from cdr_bench.actions import HOLD, N_ACTIONS
+from cdr_bench.actions import HOLD, N_ACTIONS, action_mask
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import (
     OUTCOME_NAMES,
     REWARD_TERMS,
     Simulator,
-    StepResult,
+    SingleStepResult,
     observation_bounds,
-    observe,
+    observe_one,
 )
-from cdr_bench.sim.core import GOAL_TERMS, SAFETY_TERMS
+from cdr_bench.sim.core import GOAL_TERMS, N_LEVELS, SAFETY_TERMS
 
+_MASKS = [action_mask(level) for level in range(N_LEVELS)]  # (27,) int8 per level
 _STATE_AC = 8  # x, y, vx, vy, level, active, goal_x, goal_y
 _STATE_BG = 6  # x, y, vx, vy, level, active
 
@@ -212,10 +213,10 @@ class CDREnv(ParallelEnv):
         big = np.float32(1e4)
         self.state_space = spaces.Box(-big, big, (M * _STATE_AC + B * _STATE_BG,), np.float32)
         self._bg_ids = [f"bg_{b}" for b in range(B)]
-        self._hold_actions = np.full((1, M), HOLD, dtype=np.int64)
+        self._hold_list = [HOLD] * M
         self._seed_stream = np.random.default_rng()
-        self._trail: list[NDArray[np.float64]] = []
-        self._last_result: StepResult | None = None
+        self._trail: list[tuple[float, float]] = []
+        self._last_result: SingleStepResult | None = None
         self._renderer: Any = None
 
     # -- spaces (cached: the same object every call) ----------------------------------------
@@ -243,7 +244,7 @@ class CDREnv(ParallelEnv):
         self.sim.reset([self.episode_seed])
         self.agents = list(self.possible_agents)
         self._last_result = None
-        self._trail = [self.sim.ac_pos_km[0, 0].copy()]
+        self._trail = [tuple(self.sim.ac_pos_km[0, 0].tolist())]
         obs = self._observations(self.agents)
         infos = {a: {"episode_seed": self.episode_seed} for a in self.agents}
         if self.render_mode == "human":
@@ -256,26 +257,26 @@ class CDREnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
         sim = self.sim
-        act = self._hold_actions.copy()
+        act = self._hold_list.copy()
         for agent in self.agents:
             if agent not in actions:
                 raise ValueError(f"missing action for live agent {agent!r}")
-            act[0, self._index[agent]] = _check_action(agent, actions[agent])
+            act[self._index[agent]] = _check_action(agent, actions[agent])
         acting = list(self.agents)
-        res = sim.step(act)
+        res = sim.step_one(act)
         self._last_result = res
-        self._trail.append(sim.pos_km[0, sim.B].copy())  # the ownship
+        self._trail.append(tuple(sim.pos_km[0, sim.B].tolist()))  # the ownship
         obs = self._observations(acting)
         rewards, terms, truncs, infos = {}, {}, {}, {}
         step = sim.steps.item(0)
         for agent in acting:
             m = self._index[agent]
-            rt = {k: float(v[0, m]) for k, v in res.rewards.items()}
-            g = sum(rt[k] for k in GOAL_TERMS)
-            s = sum(rt[k] for k in SAFETY_TERMS)
+            rt = {k: float(v) for k, v in res.rewards[m].items()}
+            g = sum([rt[k] for k in GOAL_TERMS])
+            s = sum([rt[k] for k in SAFETY_TERMS])
             rewards[agent] = g + s
-            terms[agent] = res.terminated.item(0, m)
-            truncs[agent] = res.truncated.item(0, m)
+            terms[agent] = res.terminated[m]
+            truncs[agent] = res.truncated[m]
             info: dict[str, Any] = {
                 "reward_terms": rt,
                 "goal_reward": g,
@@ -284,13 +285,13 @@ class CDREnv(ParallelEnv):
                 if rt["los"]
                 else [],
                 "nmac_with": self._partners(res.nmac_with[0, m]) if rt["nmac"] else [],
-                "invalid_action": res.invalid_action.item(0, m),
-                "outside": res.outside.item(0, m),
-                "min_separation_km": res.min_sep_km.item(0, m),
+                "invalid_action": res.invalid_action[m],
+                "outside": res.outside[m],
+                "min_separation_km": res.min_sep_km[m],
                 "step": step,
             }
             if terms[agent] or truncs[agent]:
-                info["outcome"] = OUTCOME_NAMES[res.outcome.item(0, m)]
+                info["outcome"] = OUTCOME_NAMES[res.outcome[m]]
             infos[agent] = info
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.render_mode == "human":
@@ -303,10 +304,13 @@ class CDREnv(ParallelEnv):
         return [self._bg_ids[i] if i < B else self.possible_agents[i - B] for i in idx]
 
     def _observations(self, agents: list[str]) -> dict[str, dict[str, NDArray[Any]]]:
-        o = observe(self.sim)[0]
-        masks = self.sim.action_masks()[0]
+        o = observe_one(self.sim)
+        level = self.sim.level[0, self.sim.B :].tolist()
         return {
-            a: {"observation": o[self._index[a]], "action_mask": masks[self._index[a]]}
+            a: {
+                "observation": o[self._index[a]],
+                "action_mask": _MASKS[level[self._index[a]]].copy(),
+            }
             for a in agents
         }
 

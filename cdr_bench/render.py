@@ -3,13 +3,14 @@ ticks, LoS rings, the ownship's goal and trail. No simulator state is changed he
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw
 
-from cdr_bench.sim.core import Simulator, StepResult
+from cdr_bench.sim.core import Simulator, SingleStepResult, StepResult
 
 LEVEL_COLOURS = [(66, 133, 244), (52, 168, 83), (251, 140, 0)]  # level 0, 1, 2
 SIZE_PX = 512
@@ -18,8 +19,8 @@ MARGIN_PX = 24
 
 def draw_frame(
     sim: Simulator,
-    trail: list[NDArray[np.float64]] | None = None,
-    last: StepResult | None = None,
+    trail: Sequence[Sequence[float]] | None = None,
+    last: StepResult | SingleStepResult | None = None,
     episode: int = 0,
 ) -> NDArray[np.uint8]:
     """RGB frame (H, W, 3) uint8 of episode ``episode`` of ``sim``."""

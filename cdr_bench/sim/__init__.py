@@ -4,16 +4,19 @@ from cdr_bench.sim.core import (
     OUTCOME_NAMES,
     REWARD_TERMS,
     Simulator,
+    SingleStepResult,
     StepResult,
 )
-from cdr_bench.sim.observation import feature_names, observation_bounds, observe
+from cdr_bench.sim.observation import feature_names, observation_bounds, observe, observe_one
 
 __all__ = [
     "OUTCOME_NAMES",
     "REWARD_TERMS",
+    "SingleStepResult",
     "Simulator",
     "StepResult",
     "feature_names",
     "observation_bounds",
     "observe",
+    "observe_one",
 ]

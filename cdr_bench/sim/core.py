@@ -21,6 +21,7 @@ level is within ``spawn_clearance_km``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +77,57 @@ class StepResult:
     """outcome code if the aircraft finished this step, else RUNNING"""
     min_sep_km: NDArray[np.float64]
     """smallest swept horizontal distance to any same-level aircraft (inf if none)"""
+
+
+@dataclass
+class SingleStepResult:
+    """A :class:`StepResult` of a single-episode simulator (``E = 1``) in Python scalars.
+
+    Per-aircraft fields are lists of length ``M``; ``los_with`` / ``nmac_with`` keep the
+    (1, M, B + M) arrays of :class:`StepResult` (a shared read-only array of ``False`` when the
+    step had no event). Every value equals the one :meth:`Simulator.step` gives.
+    """
+
+    acting: list[bool]
+    rewards: list[dict[str, float]]
+    """named reward terms of each aircraft"""
+    los_with: NDArray[np.bool_]
+    nmac_with: NDArray[np.bool_]
+    invalid_action: list[bool]
+    outside: list[bool]
+    reached_goal: list[bool]
+    terminated: list[bool]
+    truncated: list[bool]
+    outcome: list[int]
+    min_sep_km: list[float]
+
+
+def sq(x: float) -> float:
+    """x * x, which is numpy's ``x ** 2``; Python's ``x ** 2`` calls ``pow`` (may round apart)."""
+    return x * x
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``np.minimum(np.maximum(x, lo), hi)`` on floats, ties resolved as numpy does (to the
+    second argument, which matters for the sign of a zero)."""
+    x = x if x > lo else lo
+    return x if x < hi else hi
+
+
+def _as_single(r: StepResult) -> SingleStepResult:
+    return SingleStepResult(
+        acting=r.acting[0].tolist(),
+        rewards=[{k: v.item(0, m) for k, v in r.rewards.items()} for m in range(r.acting.shape[1])],
+        los_with=r.los_with,
+        nmac_with=r.nmac_with,
+        invalid_action=r.invalid_action[0].tolist(),
+        outside=r.outside[0].tolist(),
+        reached_goal=r.reached_goal[0].tolist(),
+        terminated=r.terminated[0].tolist(),
+        truncated=r.truncated[0].tolist(),
+        outcome=r.outcome[0].tolist(),
+        min_sep_km=r.min_sep_km[0].tolist(),
+    )
 
 
 class Simulator:
@@ -164,6 +216,16 @@ class Simulator:
         # gathering per-row neighbours with .take instead of three-array fancy indexing.
         self._pair_offset = (np.arange(E * M) * N).reshape(E, M, 1)
         self._episode_offset = (np.arange(E) * N).reshape(E, 1, 1)
+        # Python-scalar copies for the single-episode path (:meth:`step_one`).
+        self._turn_list = self._turn_deg.tolist()
+        self._speed_change_list = self._speed_change_kt.tolist()
+        self._level_after_list = self._level_after.tolist()
+        self._invalid_list = self._level_change_invalid.tolist()
+        self._route_xy = np.concatenate([self.route_start_km, self.route_unit], axis=1).tolist()
+        self._no_events = np.zeros((1, M, N), dtype=bool)
+        self._no_events.flags.writeable = False
+        self._spacing_list = self.route_spacing_km.tolist()
+        self._heading_trig: dict[float, tuple[complex, float, float, complex]] = {}
 
     # Views of the combined arrays (in-place writes go through to them).
     bg_pos_km = property(lambda self: self.pos_km[:, : self.B], doc="(E, B, 2) km")
@@ -433,6 +495,226 @@ class Simulator:
             outcome=outcome,
             min_sep_km=np.minimum.reduce(d_judged, axis=2, initial=np.inf),
         )
+
+    def _trig(self, heading_deg: float) -> tuple[complex, float, float, complex]:
+        """Of a heading in degrees: the unit velocity e^{i(90° - h)} (east, north as real,
+        imaginary), sin h, cos h and e^{i(h - 90°)}, computed by numpy exactly as :meth:`step`
+        and :func:`observe` compute them, and cached (headings repeat: turns are steps)."""
+        v = self._heading_trig.get(heading_deg)
+        if v is None:
+            hd = np.array([heading_deg])
+            h = np.deg2rad(hd)
+            v = (
+                np.exp(1j * np.deg2rad(90.0 - hd)).item(),
+                np.sin(h).item(),
+                np.cos(h).item(),
+                np.exp(1j * (h - np.pi / 2)).item(),
+            )
+            if heading_deg != 0.0:  # 0.0 and -0.0 share a key but not a sine
+                if len(self._heading_trig) >= 65536:
+                    self._heading_trig.clear()
+                self._heading_trig[heading_deg] = v
+        return v
+
+    def step_one(self, actions: Sequence[int]) -> SingleStepResult:
+        """:meth:`step` of a single-episode simulator (``E = 1``): what the PettingZoo env calls.
+
+        The same model with bit-identical results (a test compares every state array, result
+        and observation with :meth:`step` over thousands of random steps on every shipped
+        scenario), faster: at ``E = 1`` numpy's fixed cost per call, not arithmetic, is the
+        cost of a step, so the per-aircraft work of the controlled aircraft is done on Python
+        floats and numpy is kept for the work over all aircraft. Operations whose result numpy
+        may round differently from Python -- complex products and magnitudes (numpy's SIMD
+        loops may fuse multiply-adds) and transcendental functions -- stay in numpy; only
+        ``+ - * /``, ``%``, comparisons, min/max and degree-to-radian scaling, which IEEE 754
+        rounds the same everywhere, move to Python.
+
+        Args:
+            actions: ``M`` action indices in 0..26, validated by the caller; aircraft that are
+                not flying hold.
+        """
+        if self.E != 1:
+            raise ValueError(f"step_one needs a single-episode simulator, this one has E={self.E}")
+        B, M, dt = self.B, self.M, self.dt_s
+        acting = self._ac_active[0].tolist()
+        if not any(acting):  # nothing flies: the general path (traffic still moves)
+            return _as_single(self.step(np.asarray(actions).reshape(1, M)))
+        cfg = self.config
+        pc, vc, lvl = self._pc[0], self._vc[0], self.level[0]
+
+        # 1. Apply the actions (heading, clipped speed, target level).
+        heading = self.ac_heading_deg[0].tolist()
+        speed = self.ac_speed_kt[0].tolist()
+        old_level = lvl[B:].tolist()
+        invalid, new_level = [], []
+        lo, hi = self.min_speed_kt, self.max_speed_kt
+        for m in range(M):
+            a = actions[m] if acting[m] else 13
+            lv = old_level[m]
+            invalid.append(self._invalid_list[lv][a])
+            new_level.append(self._level_after_list[lv][a])
+            h = (heading[m] + self._turn_list[a]) % 360.0
+            heading[m] = h
+            speed[m] = _clip(speed[m] + self._speed_change_list[a], lo, hi)
+            vc[B + m] = self._trig(h)[0] * (speed[m] * KM_PER_S_PER_KT * acting[m])
+        self.ac_heading_deg[0] = heading
+        self.ac_speed_kt[0] = speed
+
+        # 2. Swept separation against every aircraft (as in step()).
+        # Occupied levels as bit masks, 0 for aircraft not in the sky; the controlled aircraft
+        # occupy their old and new level.
+        occ = np.left_shift(self.active[0], lvl)
+        occ[B:] = [(1 << old_level[m] | 1 << new_level[m]) * acting[m] for m in range(M)]
+        rp = pc[None, :] - pc[B:, None]  # (M, N)
+        rv = vc[None, :] - vc[B:, None]
+        t = -(rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
+        d_min = np.abs(rp + rv * np.minimum(np.maximum(t, 0.0), dt))
+        d_judged = np.where((occ[B:, None] & occ) != 0, d_min, np.inf)
+        for m in range(M):
+            d_judged[m, B + m] = np.inf  # not its own neighbour
+        min_sep = np.minimum.reduce(d_judged, axis=1, initial=np.inf).tolist()
+        if min(min_sep) < self.los_km:
+            nmac_with = (d_judged < self.nmac_km)[None]
+            los_with = (d_judged < self.los_km)[None]
+            n_nmac = np.add.reduce(nmac_with[0], axis=1).tolist()
+            n_los = np.add.reduce(los_with[0], axis=1).tolist()
+        else:
+            nmac_with = los_with = self._no_events
+            n_nmac = n_los = [0] * M
+
+        # 3. Swept goal test; |goal - v dt| of the path term in the same numpy call.
+        gc = self._goal_c[0] - pc[B:]
+        va = vc[B:]
+        along = (gc * va.conj()).real.tolist()
+        speed_km_s = np.abs(va).tolist()
+        gl, vl = gc.tolist(), va.tolist()
+        tg = [_clip(along[m] / (sq(speed_km_s[m]) + 1e-300), 0.0, dt) for m in range(M)]
+        ends = [gl[m] - vl[m] * tg[m] for m in range(M)] + [gl[m] - vl[m] * dt for m in range(M)]
+        miss = np.abs(ends).tolist()
+        goal_r = cfg.ownship.goal_radius_km
+
+        # 4. Move.
+        self.pos_km += self.vel_km_s * dt
+        lvl[B:] = new_level
+        self.steps[0] += 1
+        self._advance_traffic_one()
+
+        # 5. Outcomes and named rewards, aircraft by aircraft.
+        size = self.size_km
+        xy = self.pos_km[0, B:].tolist()
+        w = cfg.reward
+        path_w = -w.path / size**2
+        at_horizon = self.steps.item(0) >= self.max_steps
+        boundary_ends = cfg.sector.boundary_terminates
+        los_ends = cfg.separation.los_terminates
+        rewards, outside, reached, terminated, truncated, outcome = [], [], [], [], [], []
+        for m in range(M):
+            x, y = xy[m]
+            on = acting[m]
+            out = on and (x < 0.0 or x > size or y < 0.0 or y > size)
+            hit = on and miss[m] < goal_r
+            code = SUCCESS if hit else RUNNING
+            if boundary_ends and out:
+                code = BOUNDARY
+            if los_ends and n_los[m] > 0:
+                code = LOS
+            if n_nmac[m] > 0:
+                code = NMAC
+            term = code != RUNNING
+            trunc = on and not term and at_horizon
+            if trunc:
+                code = TIMEOUT
+            rewards.append(
+                {
+                    "goal": w.goal * (code == SUCCESS),
+                    "path": path_w * sq(miss[M + m]) * on,
+                    "boundary": -w.boundary * out,
+                    "step": -w.step * on,
+                    "timeout": -w.timeout * trunc,
+                    "los": -w.los * (n_los[m] - n_nmac[m]),
+                    "nmac": -w.nmac * n_nmac[m],
+                }
+            )
+            if term or trunc:
+                self.ac_outcome[0, m] = code
+                self._ac_active[0, m] = False
+            outside.append(out)
+            reached.append(hit)
+            terminated.append(term)
+            truncated.append(trunc)
+            outcome.append(code)
+        if not all(acting) or any(terminated) or any(truncated):
+            vc[B:] *= self._ac_active[0]  # aircraft that left stop moving (else a no-op)
+        return SingleStepResult(
+            acting=acting,
+            rewards=rewards,
+            los_with=los_with,
+            nmac_with=nmac_with,
+            invalid_action=invalid,
+            outside=outside,
+            reached_goal=reached,
+            terminated=terminated,
+            truncated=truncated,
+            outcome=outcome,
+            min_sep_km=min_sep,
+        )
+
+    def _advance_traffic_one(self) -> None:
+        """:meth:`_advance_traffic` of a single live episode, spawns route by route."""
+        R, C, B = self.R, self.C, self.B
+        if self.X:
+            p = self.pos_km[:, R * C : B]
+            outside = ((p < 0.0) | (p > self.size_km)).any(axis=2)
+            self.active[:, R * C : B] &= ~outside
+        if not R:
+            return
+        step_km = self._traffic_step_km
+        self.bg_arc_km += step_km
+        arr = self.active[0, : R * C]
+        arr &= self.bg_arc_km[0] < self._route_len_slot
+        last = self.route_last_arc_km[0]
+        last += step_km
+        last_l = last.tolist()
+        due = [r for r in range(R) if last_l[r] >= self._spacing_list[r]]
+        if not due:
+            return
+        B = self.B
+        spacing = self._spacing_list
+        waiting = self.route_waiting[0]
+        count = self.route_spawn_count[0]
+        clearance = self.config.traffic.spawn_clearance_km
+        flying = self._ac_active[0].tolist()
+        ac_level = self.level[0, B:].tolist()
+        own = self._pc[0, B:].tolist()
+        spawns = []
+        blocked_routes = []
+        for r in due:
+            arc = 0.0 if waiting[r] else last_l[r] - spacing[r]
+            level = int(count[r]) % N_LEVELS
+            sx, sy, ux, uy = self._route_xy[r]
+            x, y = sx + arc * ux, sy + arc * uy
+            near = [
+                complex(x, y) - own[m] for m in range(self.M) if flying[m] and ac_level[m] == level
+            ]
+            if near and bool((np.abs(near) < clearance).any()):
+                blocked_routes.append(r)
+            else:
+                spawns.append((r, arc, x, y, level))
+        for r in due:  # a waiting route stays due until it spawns: others never wait
+            waiting[r] = r in blocked_routes
+        for r, arc, x, y, level in spawns:
+            try:
+                free = arr[r * C : (r + 1) * C].tolist().index(False)
+            except ValueError:  # pragma: no cover - capacity n + 2 suffices
+                raise RuntimeError("airway slot capacity exceeded") from None
+            slot = r * C + free
+            arr[slot] = True
+            self.bg_arc_km[0, slot] = arc
+            self.pos_km[0, slot] = (x, y)
+            self.vel_km_s[0, slot] = self._route_vel_km_s[r]
+            self.level[0, slot] = level
+            last[r] = arc
+            count[r] += 1
 
     def _advance_traffic(self, live: NDArray[np.bool_]) -> None:
         """Airway aircraft leave at the end of their route; due spawns enter when clear."""

@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.core import Simulator
+from cdr_bench.sim.core import Simulator, _clip
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 OWN_FEATURES = (
@@ -155,6 +155,110 @@ def observe(sim: Simulator) -> NDArray[np.float32]:
         nb[absent] = 0.0
     low, high = _bounds(cfg)
     return np.minimum(np.maximum(out, low, out=out), high, out=out).astype(np.float32)
+
+
+def observe_one(sim: Simulator) -> NDArray[np.float32]:
+    """:func:`observe` of a single-episode simulator (``E = 1``), (M, F) float32.
+
+    Bit-identical to ``observe(sim)[0]`` (tested): numpy computes what it may round differently
+    from Python (complex products and magnitudes, trigonometric functions, the sort) on the
+    same values as :func:`observe`; the arithmetic of the few features is done on Python floats
+    (see :meth:`Simulator.step_one`).
+    """
+    if sim.E != 1:
+        raise ValueError(f"observe_one needs a single-episode simulator, this one has E={sim.E}")
+    cfg = sim.config
+    size = sim.size_km
+    K = cfg.observation.neighbours
+    rng_km = cfg.observation.range_km
+    look = cfg.observation.lookahead_s
+    los_km = sim.los_km
+    M, B = sim.M, sim.B
+    pc, vc, level = sim._pc[0], sim._vc[0], sim.level[0]
+    own = pc[B:]
+
+    # Own state and goal.
+    trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
+    g = sim._goal_c[0] - own
+    gd = np.abs(g)
+    rel = (g * np.array([tr[3] for tr in trig]) / np.maximum(gd, 1e-9)).tolist()
+    gd_l = gd.tolist()
+    xy = sim.pos_km[0, B:].tolist()
+    goal = sim.ac_goal_km[0].tolist()
+    speed = sim.ac_speed_kt[0].tolist()
+    own_level = level[B:].tolist()
+    mid = 0.5 * (sim.min_speed_kt + sim.max_speed_kt)
+    half = max(0.5 * (sim.max_speed_kt - sim.min_speed_kt), 1e-9)
+    time = sim.steps.item(0) / sim.max_steps
+    scale = 2.0 / size
+
+    # K nearest other aircraft (horizontal distance, any level), as in observe().
+    rp = pc[None, :] - own[:, None]  # (M, N)
+    dist = np.where(sim.active[0] & sim._not_self[0], np.abs(rp), np.inf)
+    near = np.argsort(dist, axis=-1)[:, :K]  # (M, k)
+    kk = near.shape[-1]
+    pair = near + sim._pair_offset[0] if M > 1 else near  # flat index into (M, N)
+    nd = dist.take(pair).tolist()
+    nrel = rp.take(pair)
+    nvel = vc.take(near) - vc[B:, None]
+    along = (nrel * nvel.conj()).real.tolist()
+    rel_speed = np.abs(nvel).tolist()
+    nrel_l, nvel_l = nrel.tolist(), nvel.tolist()
+    nlvl = level.take(near).tolist()
+    t = [
+        [
+            _clip(-along[m][k] / (rel_speed[m][k] * rel_speed[m][k] + 1e-300), 0.0, look)
+            for k in range(kk)
+        ]
+        for m in range(M)
+    ]
+    ends = [nrel_l[m][k] + nvel_l[m][k] * t[m][k] for m in range(M) for k in range(kk)]
+    d_cpa = np.abs(ends).tolist()
+
+    rows = []
+    for m in range(M):
+        x, y = xy[m]
+        _, sin_h, cos_h, _ = trig[m]
+        row = [
+            x * scale - 1.0,
+            y * scale - 1.0,
+            sin_h,
+            cos_h,
+            (speed[m] - mid) / half,
+            own_level[m] - 1.0,
+            (goal[m][0] - x) / size,
+            (goal[m][1] - y) / size,
+            gd_l[m] / size,
+            -rel[m].imag,
+            rel[m].real,
+            time,
+        ]
+        for k in range(kk):
+            if nd[m][k] == np.inf:  # fewer than K other aircraft
+                row += _ABSENT
+                continue
+            r, v, dc = nrel_l[m][k], nvel_l[m][k], d_cpa[m * kk + k]
+            dl = float(nlvl[m][k] - own_level[m])
+            row += [
+                1.0,
+                r.real / rng_km,
+                r.imag / rng_km,
+                v.real / _VEL_SCALE_KM_S,
+                v.imag / _VEL_SCALE_KM_S,
+                dl / 2.0,
+                nd[m][k] / rng_km,
+                t[m][k] / look,
+                dc / rng_km,
+                1.0 if dl == 0 and dc < los_km else 0.0,
+            ]
+        row += _ABSENT * (K - kk)
+        rows.append(row)
+    out = np.array(rows)
+    low, high = _bounds(cfg)
+    return np.minimum(np.maximum(out, low, out=out), high, out=np.empty(out.shape, np.float32))
+
+
+_ABSENT = [0.0] * 10
 
 
 _BOUNDS_CACHE: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
