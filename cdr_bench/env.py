@@ -271,7 +271,7 @@ class CDREnv(ParallelEnv):
         step = sim.steps.item(0)
         for agent in acting:
             m = self._index[agent]
-            rt = {k: float(v) for k, v in res.rewards[m].items()}
+            rt = res.rewards[m]  # a fresh dict of floats
             g = sum([rt[k] for k in GOAL_TERMS])
             s = sum([rt[k] for k in SAFETY_TERMS])
             rewards[agent] = g + s

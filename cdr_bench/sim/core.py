@@ -21,6 +21,7 @@ level is within ``spawn_clearance_km``.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -176,8 +177,11 @@ class Simulator:
         self.N = N
         # All aircraft in one set of arrays, background first (0..B-1), controlled last
         # (B..B+M-1); the bg_* / ac_* attributes are views into them.
-        self.pos_km = np.zeros((E, N, 2))
-        self.vel_km_s = np.zeros((E, N, 2))
+        # Positions and velocities live in (E, N + M, 2) buffers whose last M entries are the
+        # goals (a goal is a fixed point: velocity 0), so that the single-episode path sweeps
+        # the goal test with the separation test; pos_km, vel_km_s and ac_goal_km are views.
+        self._pos_all = np.zeros((E, N + M, 2))
+        self._vel_all = np.zeros((E, N + M, 2))
         self.level = np.zeros((E, N), dtype=np.int64)
         self.active = np.zeros((E, N), dtype=bool)
         self.bg_arc_km = np.zeros((E, R * self.C))
@@ -187,7 +191,6 @@ class Simulator:
 
         self.ac_heading_deg = np.zeros((E, M))
         self.ac_speed_kt = np.zeros((E, M))
-        self.ac_goal_km = np.zeros((E, M, 2))
         self.ac_outcome = np.zeros((E, M), dtype=np.int8)
         self.steps = np.zeros(E, dtype=np.int64)
         not_self = np.ones((M, N), dtype=bool)
@@ -196,12 +199,8 @@ class Simulator:
         self._route_len_slot = self.route_length_km[self.slot_route]  # (R*C,)
 
         # Cached for speed: at E = 1 numpy's per-call overhead, not arithmetic, is the cost of a
-        # step, so constant work is done once here. Positions and velocities as complex
-        # numbers (east = real, north = imag): views into pos_km / vel_km_s.
-        self._pc = self.pos_km.view(np.complex128)[..., 0]  # (E, N)
-        self._vc = self.vel_km_s.view(np.complex128)[..., 0]
-        self._goal_c = self.ac_goal_km.view(np.complex128)[..., 0]  # (E, M)
-        self._ac_active = self.active[:, B:]
+        # step, so constant work is done once here.
+        self._bind_views()
         # Per action index: heading change (deg), speed change (kt); per (level, action): the
         # level after the action and whether the level change is infeasible (not executed).
         self._turn_deg = self.heading_step_deg * TRIPLES[:, 0]
@@ -225,7 +224,32 @@ class Simulator:
         self._no_events = np.zeros((1, M, N), dtype=bool)
         self._no_events.flags.writeable = False
         self._spacing_list = self.route_spacing_km.tolist()
+        self._route_vel_c = self._route_vel_km_s.view(np.complex128)[:, 0].tolist()
         self._heading_trig: dict[float, tuple[complex, float, float, complex]] = {}
+
+    _VIEWS = ("pos_km", "vel_km_s", "ac_goal_km", "_pc", "_vc", "_pcg", "_vcg", "_goal_c")
+
+    def _bind_views(self) -> None:
+        N = self.N
+        self.pos_km = self._pos_all[:, :N]  # (E, N, 2) km
+        self.vel_km_s = self._vel_all[:, :N]  # (E, N, 2) km/s
+        self.ac_goal_km = self._pos_all[:, N:]  # (E, M, 2) km
+        # As complex numbers (east = real, north = imag).
+        self._pcg = self._pos_all.view(np.complex128)[..., 0]  # (E, N + M): aircraft, goals
+        self._vcg = self._vel_all.view(np.complex128)[..., 0]
+        self._pc = self._pcg[:, :N]
+        self._vc = self._vcg[:, :N]
+        self._goal_c = self._pcg[:, N:]
+        self._ac_active = self.active[:, self.B :]
+
+    def __getstate__(self) -> dict[str, object]:
+        # Copies and pickles must not carry the views (they would become independent arrays).
+        drop = (*self._VIEWS, "_ac_active")
+        return {k: v for k, v in self.__dict__.items() if k not in drop}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
 
     # Views of the combined arrays (in-place writes go through to them).
     bg_pos_km = property(lambda self: self.pos_km[:, : self.B], doc="(E, B, 2) km")
@@ -565,15 +589,21 @@ class Simulator:
         # occupy their old and new level.
         occ = np.left_shift(self.active[0], lvl)
         occ[B:] = [(1 << old_level[m] | 1 << new_level[m]) * acting[m] for m in range(M)]
-        rp = pc[None, :] - pc[B:, None]  # (M, N)
-        rv = vc[None, :] - vc[B:, None]
+        # Swept over [0, dt] against every aircraft and, in the same arrays, against the goals
+        # (the last M columns: fixed points), the goal test of step() to the last bit.
+        N = self.N
+        pcg, vcg = self._pcg[0], self._vcg[0]
+        rp = pcg[None, :] - pcg[B:N, None]  # (M, N + M)
+        rv = vcg[None, :] - vcg[B:N, None]
         t = -(rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
         d_min = np.abs(rp + rv * np.minimum(np.maximum(t, 0.0), dt))
-        d_judged = np.where((occ[B:, None] & occ) != 0, d_min, np.inf)
+        judged = (occ[B:, None] & occ) != 0
         for m in range(M):
-            d_judged[m, B + m] = np.inf  # not its own neighbour
-        min_sep = np.minimum.reduce(d_judged, axis=1, initial=np.inf).tolist()
+            judged[m, B + m] = False  # not its own neighbour
+        d_air = d_min[:, :N]
+        min_sep = np.minimum.reduce(d_air, axis=1, initial=np.inf, where=judged).tolist()
         if min(min_sep) < self.los_km:
+            d_judged = np.where(judged, d_air, np.inf)
             nmac_with = (d_judged < self.nmac_km)[None]
             los_with = (d_judged < self.los_km)[None]
             n_nmac = np.add.reduce(nmac_with[0], axis=1).tolist()
@@ -582,15 +612,10 @@ class Simulator:
             nmac_with = los_with = self._no_events
             n_nmac = n_los = [0] * M
 
-        # 3. Swept goal test; |goal - v dt| of the path term in the same numpy call.
-        gc = self._goal_c[0] - pc[B:]
-        va = vc[B:]
-        along = (gc * va.conj()).real.tolist()
-        speed_km_s = np.abs(va).tolist()
-        gl, vl = gc.tolist(), va.tolist()
-        tg = [_clip(along[m] / (sq(speed_km_s[m]) + 1e-300), 0.0, dt) for m in range(M)]
-        ends = [gl[m] - vl[m] * tg[m] for m in range(M)] + [gl[m] - vl[m] * dt for m in range(M)]
-        miss = np.abs(ends).tolist()
+        # 3. Swept goal test (above) and |goal - v dt| of the path term.
+        reach = [d_min.item(m, N + m) for m in range(M)]
+        own, goal, vel = pc[B:].tolist(), self._goal_c[0].tolist(), vc[B:].tolist()
+        miss = np.abs([goal[m] - own[m] - vel[m] * dt for m in range(M)]).tolist()
         goal_r = cfg.ownship.goal_radius_km
 
         # 4. Move.
@@ -612,7 +637,7 @@ class Simulator:
             x, y = xy[m]
             on = acting[m]
             out = on and (x < 0.0 or x > size or y < 0.0 or y > size)
-            hit = on and miss[m] < goal_r
+            hit = on and reach[m] < goal_r
             code = SUCCESS if hit else RUNNING
             if boundary_ends and out:
                 code = BOUNDARY
@@ -627,7 +652,7 @@ class Simulator:
             rewards.append(
                 {
                     "goal": w.goal * (code == SUCCESS),
-                    "path": path_w * sq(miss[M + m]) * on,
+                    "path": path_w * sq(miss[m]) * on,
                     "boundary": -w.boundary * out,
                     "step": -w.step * on,
                     "timeout": -w.timeout * trunc,
@@ -675,9 +700,9 @@ class Simulator:
         last = self.route_last_arc_km[0]
         last += step_km
         last_l = last.tolist()
-        due = [r for r in range(R) if last_l[r] >= self._spacing_list[r]]
-        if not due:
+        if not any(map(operator.ge, last_l, self._spacing_list)):
             return
+        due = [r for r in range(R) if last_l[r] >= self._spacing_list[r]]
         B = self.B
         spacing = self._spacing_list
         waiting = self.route_waiting[0]
@@ -710,8 +735,8 @@ class Simulator:
             slot = r * C + free
             arr[slot] = True
             self.bg_arc_km[0, slot] = arc
-            self.pos_km[0, slot] = (x, y)
-            self.vel_km_s[0, slot] = self._route_vel_km_s[r]
+            self._pc[0, slot] = complex(x, y)
+            self._vc[0, slot] = self._route_vel_c[r]
             self.level[0, slot] = level
             last[r] = arc
             count[r] += 1

@@ -180,9 +180,11 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     # Own state and goal.
     trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
     g = sim._goal_c[0] - own
-    gd = np.abs(g)
-    rel = (g * np.array([tr[3] for tr in trig]) / np.maximum(gd, 1e-9)).tolist()
-    gd_l = gd.tolist()
+    gd_l = np.abs(g).tolist()
+    turned = (g * np.array([tr[3] for tr in trig])).tolist()
+    # numpy divides a complex by a real c as by c + 0i: scale = 1 / c, then both parts * scale
+    scale_l = [1.0 / (d if d > 1e-9 else 1e-9) for d in gd_l]
+    rel = [complex(z.real * k, z.imag * k) for z, k in zip(turned, scale_l, strict=True)]
     xy = sim.pos_km[0, B:].tolist()
     goal = sim.ac_goal_km[0].tolist()
     speed = sim.ac_speed_kt[0].tolist()
@@ -255,7 +257,7 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
         rows.append(row)
     out = np.array(rows)
     low, high = _bounds(cfg)
-    return np.minimum(np.maximum(out, low, out=out), high, out=np.empty(out.shape, np.float32))
+    return np.minimum(np.maximum(out, low, out=out), high, out=out).astype(np.float32)
 
 
 _ABSENT = [0.0] * 10

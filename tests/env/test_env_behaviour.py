@@ -174,3 +174,31 @@ def test_overrides_are_validated():
     assert env.config.separation.los_km == 8.0
     with pytest.raises(cdr_bench.ScenarioError, match="separation.los_kn"):
         cdr_bench.parallel_env("medium", separation={"los_kn": 8.0})
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_env_continues_exactly_like_the_original(how):
+    """Copies must not share or lose the simulator's internal views (positions as complex
+    numbers, goals): a copy taken mid-episode steps on exactly like the original."""
+    import copy
+    import pickle
+
+    env = cdr_bench.parallel_env("marl/low-2")
+    env.reset(seed=5)
+    hold = {a: actions.HOLD for a in env.possible_agents}
+    for _ in range(10):
+        env.step({a: hold[a] for a in env.agents})
+    twin = copy.deepcopy(env) if how == "deepcopy" else pickle.loads(pickle.dumps(env))
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        if not env.agents:
+            break
+        act = {a: int(rng.integers(27)) for a in env.agents}
+        o1, r1, t1, u1, _ = env.step(act)
+        o2, r2, t2, u2, _ = twin.step(act)
+        assert r1 == r2 and t1 == t2 and u1 == u2
+        for a in o1:
+            assert o1[a]["observation"].tobytes() == o2[a]["observation"].tobytes()
+    assert env.agents == twin.agents
+    np.testing.assert_array_equal(env.sim.pos_km, twin.sim.pos_km)
+    assert not np.shares_memory(env.sim.pos_km, twin.sim.pos_km)
