@@ -80,7 +80,29 @@ class StepResult:
     """smallest swept horizontal distance to any same-level aircraft (inf if none)"""
 
 
-@dataclass
+@dataclass(frozen=True, slots=True)
+class _EpisodeViews:
+    """1-D views of episode 0 of a :class:`Simulator`'s arrays (single-episode path)."""
+
+    pc: NDArray[np.complex128]
+    vc: NDArray[np.complex128]
+    pcg: NDArray[np.complex128]
+    vcg: NDArray[np.complex128]
+    own: NDArray[np.complex128]
+    own_v: NDArray[np.complex128]
+    goal: NDArray[np.complex128]
+    level: NDArray[np.int64]
+    active: NDArray[np.bool_]
+    ac_active: NDArray[np.bool_]
+    arc_all: NDArray[np.float64]
+    bg_arc: NDArray[np.float64]
+    last_arc: NDArray[np.float64]
+    route_active: NDArray[np.bool_]
+    count: NDArray[np.int64]
+    pos: NDArray[np.float64]
+
+
+@dataclass(slots=True)
 class SingleStepResult:
     """A :class:`StepResult` of a single-episode simulator (``E = 1``) in Python scalars.
 
@@ -184,8 +206,9 @@ class Simulator:
         self._vel_all = np.zeros((E, N + M, 2))
         self.level = np.zeros((E, N), dtype=np.int64)
         self.active = np.zeros((E, N), dtype=bool)
-        self.bg_arc_km = np.zeros((E, R * self.C))
-        self.route_last_arc_km = np.zeros((E, R))
+        # Arc flown by each airway slot, then by the newest aircraft of each route: one buffer,
+        # so that the single-episode path advances both with one call (views below).
+        self._arc_all = np.zeros((E, R * self.C + R))
         self.route_spawn_count = np.zeros((E, R), dtype=np.int64)
         self.route_waiting = np.zeros((E, R), dtype=bool)
 
@@ -225,9 +248,25 @@ class Simulator:
         self._no_events.flags.writeable = False
         self._spacing_list = self.route_spacing_km.tolist()
         self._route_vel_c = self._route_vel_km_s.view(np.complex128)[:, 0].tolist()
+        # _judge[mask, occ]: an aircraft occupying the levels in bit mask ``mask`` is judged
+        # against one occupying ``occ`` (0 when not in the sky) when they share a level.
+        self._judge = (np.arange(8)[:, None] & np.arange(8)[None, :]) != 0
         self._heading_trig: dict[float, tuple[complex, float, float, complex]] = {}
 
-    _VIEWS = ("pos_km", "vel_km_s", "ac_goal_km", "_pc", "_vc", "_pcg", "_vcg", "_goal_c")
+    _VIEWS = (
+        "pos_km",
+        "vel_km_s",
+        "ac_goal_km",
+        "bg_arc_km",
+        "route_last_arc_km",
+        "_pc",
+        "_vc",
+        "_pcg",
+        "_vcg",
+        "_goal_c",
+        "_ac_active",
+        "_one",
+    )
 
     def _bind_views(self) -> None:
         N = self.N
@@ -241,10 +280,32 @@ class Simulator:
         self._vc = self._vcg[:, :N]
         self._goal_c = self._pcg[:, N:]
         self._ac_active = self.active[:, self.B :]
+        RC = self.R * self.C
+        self.bg_arc_km = self._arc_all[:, :RC]  # (E, R*C) km
+        self.route_last_arc_km = self._arc_all[:, RC:]  # (E, R) km
+        # Episode 0's 1-D views, for the single-episode path.
+        self._one = _EpisodeViews(
+            pc=self._pc[0],
+            vc=self._vc[0],
+            pcg=self._pcg[0],
+            vcg=self._vcg[0],
+            own=self._pcg[0, self.B : N],
+            own_v=self._vcg[0, self.B : N],
+            goal=self._goal_c[0],
+            level=self.level[0],
+            active=self.active[0],
+            ac_active=self._ac_active[0],
+            arc_all=self._arc_all[0],
+            bg_arc=self.bg_arc_km[0],
+            last_arc=self.route_last_arc_km[0],
+            route_active=self.active[0, :RC],
+            count=self.route_spawn_count[0],
+            pos=self.pos_km[0],
+        )
 
     def __getstate__(self) -> dict[str, object]:
         # Copies and pickles must not carry the views (they would become independent arrays).
-        drop = (*self._VIEWS, "_ac_active")
+        drop = self._VIEWS
         return {k: v for k, v in self.__dict__.items() if k not in drop}
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -560,11 +621,12 @@ class Simulator:
         if self.E != 1:
             raise ValueError(f"step_one needs a single-episode simulator, this one has E={self.E}")
         B, M, dt = self.B, self.M, self.dt_s
-        acting = self._ac_active[0].tolist()
+        one = self._one
+        acting = one.ac_active.tolist()
         if not any(acting):  # nothing flies: the general path (traffic still moves)
             return _as_single(self.step(np.asarray(actions).reshape(1, M)))
         cfg = self.config
-        pc, vc, lvl = self._pc[0], self._vc[0], self.level[0]
+        vc, lvl = one.vc, one.level
 
         # 1. Apply the actions (heading, clipped speed, target level).
         heading = self.ac_heading_deg[0].tolist()
@@ -587,19 +649,22 @@ class Simulator:
         # 2. Swept separation against every aircraft (as in step()).
         # Occupied levels as bit masks, 0 for aircraft not in the sky; the controlled aircraft
         # occupy their old and new level.
-        occ = np.left_shift(self.active[0], lvl)
-        occ[B:] = [(1 << old_level[m] | 1 << new_level[m]) * acting[m] for m in range(M)]
-        # Swept over [0, dt] against every aircraft and, in the same arrays, against the goals
-        # (the last M columns: fixed points), the goal test of step() to the last bit.
-        N = self.N
-        pcg, vcg = self._pcg[0], self._vcg[0]
-        rp = pcg[None, :] - pcg[B:N, None]  # (M, N + M)
-        rv = vcg[None, :] - vcg[B:N, None]
-        t = -(rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
-        d_min = np.abs(rp + rv * np.minimum(np.maximum(t, 0.0), dt))
-        judged = (occ[B:, None] & occ) != 0
+        occ = np.left_shift(one.active, lvl)
+        masks = [(1 << old_level[m] | 1 << new_level[m]) * acting[m] for m in range(M)]
+        for m in range(M):
+            occ[B + m] = masks[m]
+        judged = self._judge[masks].take(occ, axis=1)  # (M, N)
         for m in range(M):
             judged[m, B + m] = False  # not its own neighbour
+        # Swept over [0, dt] against every aircraft and, in the same arrays, against the goals
+        # (the last M columns: fixed points), the goal test of step() to the last bit. With
+        # q = -t of step(), u = clip(q, -dt, 0) = -clip(t, 0, dt) and rp - rv u = rp + rv t
+        # exactly (IEEE rounding is symmetric in sign), one negation fewer.
+        N = self.N
+        rp = one.pcg[None, :] - one.own[:, None]  # (M, N + M)
+        rv = one.vcg[None, :] - one.own_v[:, None]
+        q = (rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
+        d_min = np.abs(rp - rv * np.maximum(np.minimum(q, 0.0), -dt))
         d_air = d_min[:, :N]
         min_sep = np.minimum.reduce(d_air, axis=1, initial=np.inf, where=judged).tolist()
         if min(min_sep) < self.los_km:
@@ -614,19 +679,20 @@ class Simulator:
 
         # 3. Swept goal test (above) and |goal - v dt| of the path term.
         reach = [d_min.item(m, N + m) for m in range(M)]
-        own, goal, vel = pc[B:].tolist(), self._goal_c[0].tolist(), vc[B:].tolist()
+        own, goal, vel = one.own.tolist(), one.goal.tolist(), one.own_v.tolist()
         miss = np.abs([goal[m] - own[m] - vel[m] * dt for m in range(M)]).tolist()
         goal_r = cfg.ownship.goal_radius_km
 
         # 4. Move.
         self.pos_km += self.vel_km_s * dt
-        lvl[B:] = new_level
+        for m in range(M):
+            lvl[B + m] = new_level[m]
         self.steps[0] += 1
         self._advance_traffic_one()
 
         # 5. Outcomes and named rewards, aircraft by aircraft.
         size = self.size_km
-        xy = self.pos_km[0, B:].tolist()
+        xy = one.pos[B:].tolist()
         w = cfg.reward
         path_w = -w.path / size**2
         at_horizon = self.steps.item(0) >= self.max_steps
@@ -662,14 +728,14 @@ class Simulator:
             )
             if term or trunc:
                 self.ac_outcome[0, m] = code
-                self._ac_active[0, m] = False
+                one.ac_active[m] = False
             outside.append(out)
             reached.append(hit)
             terminated.append(term)
             truncated.append(trunc)
             outcome.append(code)
         if not all(acting) or any(terminated) or any(truncated):
-            vc[B:] *= self._ac_active[0]  # aircraft that left stop moving (else a no-op)
+            vc[B:] *= one.ac_active  # aircraft that left stop moving (else a no-op)
         return SingleStepResult(
             acting=acting,
             rewards=rewards,
@@ -693,12 +759,12 @@ class Simulator:
             self.active[:, R * C : B] &= ~outside
         if not R:
             return
-        step_km = self._traffic_step_km
-        self.bg_arc_km += step_km
-        arr = self.active[0, : R * C]
-        arr &= self.bg_arc_km[0] < self._route_len_slot
-        last = self.route_last_arc_km[0]
-        last += step_km
+        one = self._one
+        arc_all = one.arc_all
+        arc_all += self._traffic_step_km  # every slot and every route's newest aircraft
+        arr = one.route_active
+        arr &= one.bg_arc < self._route_len_slot
+        last = one.last_arc
         last_l = last.tolist()
         if not any(map(operator.ge, last_l, self._spacing_list)):
             return
@@ -706,11 +772,11 @@ class Simulator:
         B = self.B
         spacing = self._spacing_list
         waiting = self.route_waiting[0]
-        count = self.route_spawn_count[0]
+        count = one.count
         clearance = self.config.traffic.spawn_clearance_km
-        flying = self._ac_active[0].tolist()
-        ac_level = self.level[0, B:].tolist()
-        own = self._pc[0, B:].tolist()
+        flying = one.ac_active.tolist()
+        ac_level = one.level[B:].tolist()
+        own = one.own.tolist()
         spawns = []
         blocked_routes = []
         for r in due:
@@ -734,10 +800,10 @@ class Simulator:
                 raise RuntimeError("airway slot capacity exceeded") from None
             slot = r * C + free
             arr[slot] = True
-            self.bg_arc_km[0, slot] = arc
-            self._pc[0, slot] = complex(x, y)
-            self._vc[0, slot] = self._route_vel_c[r]
-            self.level[0, slot] = level
+            one.bg_arc[slot] = arc
+            one.pc[slot] = complex(x, y)
+            one.vc[slot] = self._route_vel_c[r]
+            one.level[slot] = level
             last[r] = arc
             count[r] += 1
 

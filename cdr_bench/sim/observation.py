@@ -174,18 +174,18 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     look = cfg.observation.lookahead_s
     los_km = sim.los_km
     M, B = sim.M, sim.B
-    pc, vc, level = sim._pc[0], sim._vc[0], sim.level[0]
-    own = pc[B:]
+    one = sim._one
+    pc, vc, level, own = one.pc, one.vc, one.level, one.own
 
     # Own state and goal.
     trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
-    g = sim._goal_c[0] - own
+    g = one.goal - own
     gd_l = np.abs(g).tolist()
     turned = (g * np.array([tr[3] for tr in trig])).tolist()
     # numpy divides a complex by a real c as by c + 0i: scale = 1 / c, then both parts * scale
     scale_l = [1.0 / (d if d > 1e-9 else 1e-9) for d in gd_l]
     rel = [complex(z.real * k, z.imag * k) for z, k in zip(turned, scale_l, strict=True)]
-    xy = sim.pos_km[0, B:].tolist()
+    xy = one.pos[B:].tolist()
     goal = sim.ac_goal_km[0].tolist()
     speed = sim.ac_speed_kt[0].tolist()
     own_level = level[B:].tolist()
@@ -196,13 +196,16 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
 
     # K nearest other aircraft (horizontal distance, any level), as in observe().
     rp = pc[None, :] - own[:, None]  # (M, N)
-    dist = np.where(sim.active[0] & sim._not_self[0], np.abs(rp), np.inf)
+    dist = np.abs(rp)
+    for m in range(M):
+        dist[m, B + m] = _INF  # not its own neighbour
+    dist = np.where(one.active, dist, _INF)
     near = np.argsort(dist, axis=-1)[:, :K]  # (M, k)
     kk = near.shape[-1]
     pair = near + sim._pair_offset[0] if M > 1 else near  # flat index into (M, N)
     nd = dist.take(pair).tolist()
     nrel = rp.take(pair)
-    nvel = vc.take(near) - vc[B:, None]
+    nvel = vc.take(near) - one.own_v[:, None]
     along = (nrel * nvel.conj()).real.tolist()
     rel_speed = np.abs(nvel).tolist()
     nrel_l, nvel_l = nrel.tolist(), nvel.tolist()
@@ -236,7 +239,7 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
             time,
         ]
         for k in range(kk):
-            if nd[m][k] == np.inf:  # fewer than K other aircraft
+            if nd[m][k] == _INF:  # fewer than K other aircraft
                 row += _ABSENT
                 continue
             r, v, dc = nrel_l[m][k], nvel_l[m][k], d_cpa[m * kk + k]
@@ -261,6 +264,7 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
 
 
 _ABSENT = [0.0] * 10
+_INF = float("inf")
 
 
 _BOUNDS_CACHE: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
