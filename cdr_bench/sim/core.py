@@ -93,6 +93,8 @@ class _EpisodeViews:
     goal: NDArray[np.complex128]
     level: NDArray[np.int64]
     active: NDArray[np.bool_]
+    active_all: NDArray[np.bool_]
+    row_offset: NDArray[np.int64]
     ac_active: NDArray[np.bool_]
     arc_all: NDArray[np.float64]
     bg_arc: NDArray[np.float64]
@@ -205,7 +207,7 @@ class Simulator:
         self._pos_all = np.zeros((E, N + M, 2))
         self._vel_all = np.zeros((E, N + M, 2))
         self.level = np.zeros((E, N), dtype=np.int64)
-        self.active = np.zeros((E, N), dtype=bool)
+        self._active_all = np.zeros((E, N + M), dtype=bool)  # the goals are never active
         # Arc flown by each airway slot, then by the newest aircraft of each route: one buffer,
         # so that the single-episode path advances both with one call (views below).
         self._arc_all = np.zeros((E, R * self.C + R))
@@ -259,6 +261,7 @@ class Simulator:
         "ac_goal_km",
         "bg_arc_km",
         "route_last_arc_km",
+        "active",
         "_pc",
         "_vc",
         "_pcg",
@@ -279,6 +282,7 @@ class Simulator:
         self._pc = self._pcg[:, :N]
         self._vc = self._vcg[:, :N]
         self._goal_c = self._pcg[:, N:]
+        self.active = self._active_all[:, :N]  # (E, N) in the sky
         self._ac_active = self.active[:, self.B :]
         RC = self.R * self.C
         self.bg_arc_km = self._arc_all[:, :RC]  # (E, R*C) km
@@ -294,6 +298,8 @@ class Simulator:
             goal=self._goal_c[0],
             level=self.level[0],
             active=self.active[0],
+            active_all=self._active_all[0],
+            row_offset=np.arange(self.M)[:, None] * (N + self.M),
             ac_active=self._ac_active[0],
             arc_all=self._arc_all[0],
             bg_arc=self.bg_arc_km[0],

@@ -175,41 +175,41 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     los_km = sim.los_km
     M, B = sim.M, sim.B
     one = sim._one
-    pc, vc, level, own = one.pc, one.vc, one.level, one.own
+    vc, level, own = one.vc, one.level, one.own
+    N = sim.N
 
-    # Own state and goal.
-    trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
-    g = one.goal - own
-    gd_l = np.abs(g).tolist()
-    turned = (g * np.array([tr[3] for tr in trig])).tolist()
-    # numpy divides a complex by a real c as by c + 0i: scale = 1 / c, then both parts * scale
-    scale_l = [1.0 / (d if d > 1e-9 else 1e-9) for d in gd_l]
-    rel = [complex(z.real * k, z.imag * k) for z, k in zip(turned, scale_l, strict=True)]
-    xy = one.pos[B:].tolist()
-    goal = sim.ac_goal_km[0].tolist()
-    speed = sim.ac_speed_kt[0].tolist()
-    own_level = level[B:].tolist()
-    mid = 0.5 * (sim.min_speed_kt + sim.max_speed_kt)
-    half = max(0.5 * (sim.max_speed_kt - sim.min_speed_kt), 1e-9)
-    time = sim.steps.item(0) / sim.max_steps
-    scale = 2.0 / size
-
-    # K nearest other aircraft (horizontal distance, any level), as in observe().
-    rp = pc[None, :] - own[:, None]  # (M, N)
+    # Relative positions of every aircraft and, in the last M columns, of the goals: the same
+    # subtractions and magnitudes as observe() makes for the neighbours and for the goal.
+    rp = one.pcg[None, :] - own[:, None]  # (M, N + M)
     dist = np.abs(rp)
+    gd_l = [dist.item(m, N + m) for m in range(M)]  # |goal - own|
     for m in range(M):
         dist[m, B + m] = _INF  # not its own neighbour
-    dist = np.where(one.active, dist, _INF)
-    near = np.argsort(dist, axis=-1)[:, :K]  # (M, k)
+    dist = np.where(one.active_all, dist, _INF)  # goals and aircraft not in the sky: inf
+
+    # K nearest other aircraft (horizontal distance, any level), sorted as observe() sorts.
+    near = np.argsort(dist[:, :N], axis=-1)[:, :K]  # (M, k)
     kk = near.shape[-1]
-    pair = near + sim._pair_offset[0] if M > 1 else near  # flat index into (M, N)
+    pair = near + one.row_offset if M > 1 else near  # flat index into (M, N + M)
     nd = dist.take(pair).tolist()
-    nrel = rp.take(pair)
+    at = pair.ravel().tolist() + [m * (N + M) + N + m for m in range(M)]
+    nrel_g = rp.take(at).tolist()  # neighbours row by row, then each row's goal
     nvel = vc.take(near) - one.own_v[:, None]
-    along = (nrel * nvel.conj()).real.tolist()
     rel_speed = np.abs(nvel).tolist()
-    nrel_l, nvel_l = nrel.tolist(), nvel.tolist()
+    nvel_l = nvel.tolist()
     nlvl = level.take(near).tolist()
+    trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
+    # One complex product for both: neighbour * conj(relative velocity) (closest approach) and
+    # goal * e^{i(h - 90°)} (goal bearing relative to the heading).
+    other = [v.conjugate() for row in nvel_l for v in row] + [tr[3] for tr in trig]
+    prod = (np.array(nrel_g) * np.array(other)).tolist()
+    along = [[prod[m * kk + k].real for k in range(kk)] for m in range(M)]
+    nrel_l = [nrel_g[m * kk : (m + 1) * kk] for m in range(M)]
+    # numpy divides a complex by a real c as by c + 0i: scale = 1 / c, then both parts * scale
+    rel = []
+    for m in range(M):
+        z, k = prod[M * kk + m], 1.0 / (gd_l[m] if gd_l[m] > 1e-9 else 1e-9)
+        rel.append(complex(z.real * k, z.imag * k))
     t = [
         [
             _clip(-along[m][k] / (rel_speed[m][k] * rel_speed[m][k] + 1e-300), 0.0, look)
@@ -219,6 +219,15 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     ]
     ends = [nrel_l[m][k] + nvel_l[m][k] * t[m][k] for m in range(M) for k in range(kk)]
     d_cpa = np.abs(ends).tolist()
+
+    xy = one.pos[B:].tolist()
+    goal = sim.ac_goal_km[0].tolist()
+    speed = sim.ac_speed_kt[0].tolist()
+    own_level = level[B:].tolist()
+    mid = 0.5 * (sim.min_speed_kt + sim.max_speed_kt)
+    half = max(0.5 * (sim.max_speed_kt - sim.min_speed_kt), 1e-9)
+    time = sim.steps.item(0) / sim.max_steps
+    scale = 2.0 / size
 
     rows = []
     for m in range(M):
