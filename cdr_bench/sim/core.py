@@ -90,6 +90,10 @@ class _EpisodeViews:
     vcg: NDArray[np.complex128]
     own: NDArray[np.complex128]
     own_v: NDArray[np.complex128]
+    kin: NDArray[np.complex128]
+    """(2, N + M): positions, velocities"""
+    own_kin: NDArray[np.complex128]
+    """(2, M)"""
     goal: NDArray[np.complex128]
     level: NDArray[np.int64]
     active: NDArray[np.bool_]
@@ -204,8 +208,9 @@ class Simulator:
         # Positions and velocities live in (E, N + M, 2) buffers whose last M entries are the
         # goals (a goal is a fixed point: velocity 0), so that the single-episode path sweeps
         # the goal test with the separation test; pos_km, vel_km_s and ac_goal_km are views.
-        self._pos_all = np.zeros((E, N + M, 2))
-        self._vel_all = np.zeros((E, N + M, 2))
+        # Both in one (2, E, N + M, 2) buffer: the single-episode path forms relative positions
+        # and velocities with one subtraction.
+        self._kin_all = np.zeros((2, E, N + M, 2))
         self.level = np.zeros((E, N), dtype=np.int64)
         self._active_all = np.zeros((E, N + M), dtype=bool)  # the goals are never active
         # Arc flown by each airway slot, then by the newest aircraft of each route: one buffer,
@@ -273,12 +278,14 @@ class Simulator:
 
     def _bind_views(self) -> None:
         N = self.N
-        self.pos_km = self._pos_all[:, :N]  # (E, N, 2) km
-        self.vel_km_s = self._vel_all[:, :N]  # (E, N, 2) km/s
-        self.ac_goal_km = self._pos_all[:, N:]  # (E, M, 2) km
+        pos_all, vel_all = self._kin_all
+        self.pos_km = pos_all[:, :N]  # (E, N, 2) km
+        self.vel_km_s = vel_all[:, :N]  # (E, N, 2) km/s
+        self.ac_goal_km = pos_all[:, N:]  # (E, M, 2) km
         # As complex numbers (east = real, north = imag).
-        self._pcg = self._pos_all.view(np.complex128)[..., 0]  # (E, N + M): aircraft, goals
-        self._vcg = self._vel_all.view(np.complex128)[..., 0]
+        kin_c = self._kin_all.view(np.complex128)[..., 0]  # (2, E, N + M)
+        self._pcg = kin_c[0]  # (E, N + M): aircraft, then goals
+        self._vcg = kin_c[1]
         self._pc = self._pcg[:, :N]
         self._vc = self._vcg[:, :N]
         self._goal_c = self._pcg[:, N:]
@@ -295,6 +302,8 @@ class Simulator:
             vcg=self._vcg[0],
             own=self._pcg[0, self.B : N],
             own_v=self._vcg[0, self.B : N],
+            kin=kin_c[:, 0],
+            own_kin=kin_c[:, 0, self.B : N],
             goal=self._goal_c[0],
             level=self.level[0],
             active=self.active[0],
@@ -649,8 +658,10 @@ class Simulator:
             heading[m] = h
             speed[m] = _clip(speed[m] + self._speed_change_list[a], lo, hi)
             vc[B + m] = self._trig(h)[0] * (speed[m] * KM_PER_S_PER_KT * acting[m])
-        self.ac_heading_deg[0] = heading
-        self.ac_speed_kt[0] = speed
+        hd, sp = self.ac_heading_deg[0], self.ac_speed_kt[0]
+        for m in range(M):
+            hd[m] = heading[m]
+            sp[m] = speed[m]
 
         # 2. Swept separation against every aircraft (as in step()).
         # Occupied levels as bit masks, 0 for aircraft not in the sky; the controlled aircraft
@@ -659,7 +670,10 @@ class Simulator:
         masks = [(1 << old_level[m] | 1 << new_level[m]) * acting[m] for m in range(M)]
         for m in range(M):
             occ[B + m] = masks[m]
-        judged = self._judge[masks].take(occ, axis=1)  # (M, N)
+        if M == 1:
+            judged = self._judge[masks[0]].take(occ)[None]  # (1, N)
+        else:
+            judged = self._judge[masks].take(occ, axis=1)  # (M, N)
         for m in range(M):
             judged[m, B + m] = False  # not its own neighbour
         # Swept over [0, dt] against every aircraft and, in the same arrays, against the goals
@@ -667,8 +681,7 @@ class Simulator:
         # q = -t of step(), u = clip(q, -dt, 0) = -clip(t, 0, dt) and rp - rv u = rp + rv t
         # exactly (IEEE rounding is symmetric in sign), one negation fewer.
         N = self.N
-        rp = one.pcg[None, :] - one.own[:, None]  # (M, N + M)
-        rv = one.vcg[None, :] - one.own_v[:, None]
+        rp, rv = one.kin[:, None, :] - one.own_kin[:, :, None]  # each (M, N + M)
         q = (rp * rv.conj()).real / (np.abs(rv) ** 2 + 1e-300)
         d_min = np.abs(rp - rv * np.maximum(np.minimum(q, 0.0), -dt))
         d_air = d_min[:, :N]
