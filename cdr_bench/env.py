@@ -265,18 +265,20 @@ class CDREnv(ParallelEnv):
         acting = list(self.agents)
         res = sim.step_one(act)
         self._last_result = res
-        self._trail.append(tuple(sim.pos_km[0, sim.B].tolist()))  # the ownship
+        own = sim._one.pc.item(sim.B)  # the ownship, as a complex number
+        self._trail.append((own.real, own.imag))
         obs = self._observations(acting)
         rewards, terms, truncs, infos = {}, {}, {}, {}
         step = sim.steps.item(0)
+        finished = False
         for agent in acting:
             m = self._index[agent]
             rt = res.rewards[m]  # a fresh dict of floats
-            g = sum([rt[k] for k in GOAL_TERMS])
-            s = sum([rt[k] for k in SAFETY_TERMS])
+            g = sum(map(rt.__getitem__, GOAL_TERMS))
+            s = sum(map(rt.__getitem__, SAFETY_TERMS))
             rewards[agent] = g + s
-            terms[agent] = res.terminated[m]
-            truncs[agent] = res.truncated[m]
+            terms[agent] = term = res.terminated[m]
+            truncs[agent] = trunc = res.truncated[m]
             info: dict[str, Any] = {
                 "reward_terms": rt,
                 "goal_reward": g,
@@ -290,10 +292,12 @@ class CDREnv(ParallelEnv):
                 "min_separation_km": res.min_sep_km[m],
                 "step": step,
             }
-            if terms[agent] or truncs[agent]:
+            if term or trunc:
                 info["outcome"] = OUTCOME_NAMES[res.outcome[m]]
+                finished = True
             infos[agent] = info
-        self.agents = [a for a in acting if not (terms[a] or truncs[a])]
+        if finished:
+            self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
@@ -305,7 +309,7 @@ class CDREnv(ParallelEnv):
 
     def _observations(self, agents: list[str]) -> dict[str, dict[str, NDArray[Any]]]:
         o = observe_one(self.sim)
-        level = self.sim.level[0, self.sim.B :].tolist()
+        level = self.sim._one.level[self.sim.B :].tolist()
         return {
             a: {
                 "observation": o[self._index[a]],

@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.core import Simulator, _clip
+from cdr_bench.sim.core import Simulator
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 OWN_FEATURES = (
@@ -191,33 +191,31 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     near = np.argsort(dist[:, :N], axis=-1)[:, :K]  # (M, k)
     kk = near.shape[-1]
     pair = near + one.row_offset if M > 1 else near  # flat index into (M, N + M)
-    nd = dist.take(pair).tolist()
-    at = pair.ravel().tolist() + [m * (N + M) + N + m for m in range(M)]
-    nrel_g = rp.take(at).tolist()  # neighbours row by row, then each row's goal
-    nvel = vc.take(near) - one.own_v[:, None]
-    rel_speed = np.abs(nvel).tolist()
-    nvel_l = nvel.tolist()
-    nlvl = level.take(near).tolist()
+    nd = dist.take(pair).ravel().tolist()  # flat: row m, neighbour k at m * kk + k
+    at = pair.ravel().tolist()
+    for m in range(M):
+        at.append(m * (N + M) + N + m)
+    nrel = rp.take(at).tolist()  # neighbours row by row, then each row's goal
+    nvel_a = vc.take(near) - one.own_v[:, None]
+    rel_speed = np.abs(nvel_a).ravel().tolist()
+    nvel = nvel_a.ravel().tolist()
+    nlvl = level.take(near).ravel().tolist()
     trig = [sim._trig(h) for h in sim.ac_heading_deg[0].tolist()]
     # One complex product for both: neighbour * conj(relative velocity) (closest approach) and
     # goal * e^{i(h - 90°)} (goal bearing relative to the heading).
-    other = [v.conjugate() for row in nvel_l for v in row] + [tr[3] for tr in trig]
-    prod = (np.array(nrel_g) * np.array(other)).tolist()
-    along = [[prod[m * kk + k].real for k in range(kk)] for m in range(M)]
-    nrel_l = [nrel_g[m * kk : (m + 1) * kk] for m in range(M)]
-    # numpy divides a complex by a real c as by c + 0i: scale = 1 / c, then both parts * scale
-    rel = []
-    for m in range(M):
-        z, k = prod[M * kk + m], 1.0 / (gd_l[m] if gd_l[m] > 1e-9 else 1e-9)
-        rel.append(complex(z.real * k, z.imag * k))
-    t = [
-        [
-            _clip(-along[m][k] / (rel_speed[m][k] * rel_speed[m][k] + 1e-300), 0.0, look)
-            for k in range(kk)
-        ]
-        for m in range(M)
-    ]
-    ends = [nrel_l[m][k] + nvel_l[m][k] * t[m][k] for m in range(M) for k in range(kk)]
+    other = [v.conjugate() for v in nvel]
+    for tr in trig:
+        other.append(tr[3])
+    prod = (np.array(nrel) * np.array(other)).tolist()
+    n = M * kk
+    t, ends = [], []
+    for i in range(n):
+        s = rel_speed[i]
+        ti = -prod[i].real / (s * s + 1e-300)
+        ti = ti if ti > 0.0 else 0.0  # np.maximum / np.minimum, ties to the bound
+        ti = ti if ti < look else look
+        t.append(ti)
+        ends.append(nrel[i] + nvel[i] * ti)
     d_cpa = np.abs(ends).tolist()
 
     xy = one.pos[B:].tolist()
@@ -233,38 +231,43 @@ def observe_one(sim: Simulator) -> NDArray[np.float32]:
     for m in range(M):
         x, y = xy[m]
         _, sin_h, cos_h, _ = trig[m]
+        # numpy divides a complex by a real c as by c + 0i: scale 1 / c, both parts * scale
+        z, g = prod[n + m], gd_l[m]
+        inv = 1.0 / (g if g > 1e-9 else 1e-9)
+        lv = own_level[m]
         row = [
             x * scale - 1.0,
             y * scale - 1.0,
             sin_h,
             cos_h,
             (speed[m] - mid) / half,
-            own_level[m] - 1.0,
+            lv - 1.0,
             (goal[m][0] - x) / size,
             (goal[m][1] - y) / size,
-            gd_l[m] / size,
-            -rel[m].imag,
-            rel[m].real,
+            g / size,
+            -(z.imag * inv),
+            z.real * inv,
             time,
         ]
-        for k in range(kk):
-            if nd[m][k] == _INF:  # fewer than K other aircraft
+        for i in range(m * kk, (m + 1) * kk):
+            d = nd[i]
+            if d == _INF:  # fewer than K other aircraft
                 row += _ABSENT
                 continue
-            r, v, dc = nrel_l[m][k], nvel_l[m][k], d_cpa[m * kk + k]
-            dl = float(nlvl[m][k] - own_level[m])
-            row += [
+            r, v, dc = nrel[i], nvel[i], d_cpa[i]
+            dl = float(nlvl[i] - lv)
+            row += (
                 1.0,
                 r.real / rng_km,
                 r.imag / rng_km,
                 v.real / _VEL_SCALE_KM_S,
                 v.imag / _VEL_SCALE_KM_S,
                 dl / 2.0,
-                nd[m][k] / rng_km,
-                t[m][k] / look,
+                d / rng_km,
+                t[i] / look,
                 dc / rng_km,
                 1.0 if dl == 0 and dc < los_km else 0.0,
-            ]
+            )
         row += _ABSENT * (K - kk)
         rows.append(row)
     out = np.array(rows)
