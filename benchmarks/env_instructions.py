@@ -4,7 +4,8 @@ Wall-clock steps/s on a shared virtual machine scatter by tens of percent from m
 the number of instructions executed does not. The script runs the stepping loop of
 ``env_throughput.py`` (random feasible actions, auto-reset) under ``valgrind --tool=cachegrind
 --cache-sim=no`` for two step counts and reports the difference per step, so start-up and
-imports cancel out.
+imports cancel out. Counts still vary by a few percent between runs (memory layout changes
+which code paths numpy's vector loops take), so the median of ``--runs`` measurements is shown.
 
 Run: python benchmarks/env_instructions.py [--scenarios high] [--steps 500 2500]
 Needs valgrind (apt install valgrind); each run takes about a minute.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -41,6 +43,7 @@ def _worker(scenario: str, steps: int) -> None:
 
 def _instructions(scenario: str, steps: int) -> int:
     cmd = [
+        *(["setarch", platform.machine(), "-R"] if shutil.which("setarch") else []),  # no ASLR
         "valgrind",
         "--tool=cachegrind",
         "--cache-sim=no",
@@ -51,7 +54,8 @@ def _instructions(scenario: str, steps: int) -> int:
         scenario,
         str(steps),
     ]
-    out = subprocess.run(cmd, capture_output=True, text=True, check=True, env=os.environ).stderr
+    env = dict(os.environ, PYTHONHASHSEED="0")  # string hashing is randomised per process
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True, env=env).stderr
     m = re.search(r"I\s+refs:\s+([\d,]+)", out)
     if m is None:
         raise RuntimeError(f"no instruction count in valgrind's output:\n{out[-2000:]}")
@@ -65,6 +69,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--scenarios", nargs="+", default=["high"])
     ap.add_argument("--steps", nargs=2, type=int, default=[500, 2500], metavar=("N1", "N2"))
+    ap.add_argument("--runs", type=int, default=3, help="measurements per scenario (median)")
     args = ap.parse_args()
     if shutil.which("valgrind") is None:
         sys.exit("valgrind is not installed (apt install valgrind)")
@@ -74,11 +79,14 @@ def main() -> None:
     import cdr_bench
 
     print(f"# cdr_bench from {os.path.dirname(cdr_bench.__file__)}")
-    print("| scenario | instructions per PettingZoo step |")
-    print("|---|---:|")
+    print(f"| scenario | instructions per PettingZoo step, median of {args.runs} | range |")
+    print("|---|---:|---|")
     for sc in args.scenarios:
-        per_step = (_instructions(sc, n2) - _instructions(sc, n1)) / (n2 - n1)
-        print(f"| {sc} | {per_step:,.0f} |")
+        runs = sorted(
+            (_instructions(sc, n2) - _instructions(sc, n1)) / (n2 - n1) for _ in range(args.runs)
+        )
+        median = runs[len(runs) // 2]
+        print(f"| {sc} | {median:,.0f} | {runs[0]:,.0f} - {runs[-1]:,.0f} |")
 
 
 if __name__ == "__main__":
