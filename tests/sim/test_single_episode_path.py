@@ -40,6 +40,8 @@ VARIANTS = {
     "boundary": ("medium", {"sector": {"boundary_terminates": True}}),
     "nmac": ("high", {"separation": {"los_km": 10.0, "nmac_km": 4.0}}),
     "marl-los-ends": ("marl/medium-4", {"separation": {"los_terminates": True}}),
+    "more-neighbours-than-aircraft": ("tactical/crossing", {"observation": {"neighbours": 16}}),
+    "no-traffic": ("low", {"traffic": {"routes": 0}}),
 }
 
 
