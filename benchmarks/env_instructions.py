@@ -28,17 +28,12 @@ def _worker(scenario: str, steps: int) -> None:
 
     import cdr_bench
 
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from env_throughput import random_steps  # the loop env_throughput.py times
+
     env = cdr_bench.parallel_env(scenario)
-    rng = np.random.default_rng(0)
     obs, _ = env.reset(seed=0)
-    for _ in range(steps):
-        actions = {}
-        for a in env.agents:
-            feasible = np.flatnonzero(obs[a]["action_mask"])
-            actions[a] = int(feasible[rng.integers(len(feasible))])
-        obs, *_ = env.step(actions)
-        if not env.agents:
-            obs, _ = env.reset()
+    random_steps(env, obs, np.random.default_rng(0), steps)
 
 
 def _instructions(scenario: str, steps: int) -> int:

@@ -14,6 +14,7 @@ import argparse
 import os
 import platform
 import time
+from typing import Any
 
 import numpy as np
 
@@ -32,16 +33,23 @@ def pettingzoo_steps_per_s(
     rates = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        for _ in range(steps):
-            actions = {}
-            for a in env.agents:
-                feasible = np.flatnonzero(obs[a]["action_mask"])
-                actions[a] = int(feasible[rng.integers(len(feasible))])
-            obs, *_ = env.step(actions)
-            if not env.agents:
-                obs, _ = env.reset()
+        obs = random_steps(env, obs, rng, steps)
         rates.append(steps / (time.perf_counter() - t0))
     return float(np.median(rates)), max(rates)
+
+
+def random_steps(env: Any, obs: dict[str, Any], rng: np.random.Generator, steps: int) -> Any:
+    """Step ``env`` with random feasible actions, resetting when no agent is left; returns the
+    last observations."""
+    for _ in range(steps):
+        actions = {}
+        for a in env.agents:
+            feasible = np.flatnonzero(obs[a]["action_mask"])
+            actions[a] = int(feasible[rng.integers(len(feasible))])
+        obs, *_ = env.step(actions)
+        if not env.agents:
+            obs, _ = env.reset()
+    return obs
 
 
 def sim_throughput(scenario: str, steps: int, batch: int, seed: int = 0) -> tuple[float, float]:
