@@ -2,7 +2,7 @@
 
 Subcommands are registered by the module that owns them: each module exposes
 ``register(subparsers)`` adding its parsers with ``set_defaults(func=...)``; ``func(args)``
-returns the exit code. User errors raise :class:`CLIError` (or ``ScenarioError``) and end with a
+returns the exit code. User errors raise :class:`UserError` (or ``ScenarioError``) and end with a
 one-line message and exit code 2, never a traceback.
 """
 
@@ -15,10 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-
-class CLIError(Exception):
-    """A user error: printed as one line, exit code 2."""
-
+from cdr_bench.errors import UserError
 
 # Modules that add subcommands; a module missing from an install is skipped.
 _SUBCOMMAND_MODULES = (
@@ -111,7 +108,7 @@ def _render(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() != ".gif":
-        raise CLIError(f"--out {args.out}: expected a .gif path")
+        raise UserError(f"--out {args.out}: expected a .gif path")
     env = CDREnv(args.scenario, render_mode="rgb_array")
     policy = None
     if args.agent is not None:
@@ -154,13 +151,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from cdr_bench.scenarios import ScenarioError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (CLIError, ScenarioError) as e:
+    except UserError as e:
         print(f"cdr-bench: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.evaluate import results as rf
 from cdr_bench.evaluate.loader import AgentError, agent_identity
 from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
@@ -60,7 +60,7 @@ def resolve_jobs(
     names: list[str] = list(scenarios)
     if suite is not None:
         if suite not in SUITES:
-            raise CLIError(f"unknown suite {suite!r} (known: {', '.join(SUITES)})")
+            raise UserError(f"unknown suite {suite!r} (known: {', '.join(SUITES)})")
         known = set(list_scenarios())
         for name in SUITES[suite]:
             if name in known:
@@ -68,15 +68,15 @@ def resolve_jobs(
             else:
                 notes.append(f"suite {suite}: scenario {name} is not installed, skipped")
     if not names:
-        raise CLIError("no scenarios to run")
+        raise UserError("no scenarios to run")
     n = PAPER_EPISODES if episodes is None else episodes
     if n < 1:
-        raise CLIError(f"--episodes must be >= 1, got {n}")
+        raise UserError(f"--episodes must be >= 1, got {n}")
     jobs, seen = [], set()
     for name in names:
         cfg = load_scenario(name)
         if cfg.id in seen:
-            raise CLIError(f"scenario {cfg.id} given twice")
+            raise UserError(f"scenario {cfg.id} given twice")
         seen.add(cfg.id)
         jobs.append(Job(cfg, n))
     return jobs, notes
@@ -119,15 +119,15 @@ def evaluate(
     """
     out = Path(out)
     if out.suffix != ".json":
-        raise CLIError(f"--out {out}: expected a .json path")
+        raise UserError(f"--out {out}: expected a .json path")
     if workers < 1:
-        raise CLIError(f"--workers must be >= 1, got {workers}")
+        raise UserError(f"--workers must be >= 1, got {workers}")
     if backend not in BACKENDS:
-        raise CLIError(f"--backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
+        raise UserError(f"--backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
     if address is not None and backend != "ray":
-        raise CLIError("--address needs --backend ray")
+        raise UserError("--address needs --backend ray")
     if batch_size < 1:
-        raise CLIError(f"--batch-size must be >= 1, got {batch_size}")
+        raise UserError(f"--batch-size must be >= 1, got {batch_size}")
     identity = agent_identity(agent_path)
     agent_file = str(Path(agent_path).resolve())
     for job in jobs:  # load errors now, in this process, before any work
@@ -156,7 +156,7 @@ def evaluate(
         try:
             done = log.load()
         except ValueError as e:
-            raise CLIError(str(e)) from None
+            raise UserError(str(e)) from None
         if not log.path.exists():
             print(f"cdr-bench: no checkpoint {log.path}, starting from scratch", file=sys.stderr)
     if not log.path.exists() or not resume:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 
 def register(sub: Any) -> None:
@@ -129,7 +129,7 @@ def _report(args: argparse.Namespace) -> int:
         try:
             loaded.append((p, read_result(p)))
         except ValueError as e:
-            raise CLIError(str(e)) from None
+            raise UserError(str(e)) from None
     cmd = "cdr-bench report " + " ".join(args.results) + (f" --out {args.out}" if args.out else "")
     if args.update_readme:
         cmd += f" --update-readme {args.update_readme}"
@@ -139,7 +139,7 @@ def _report(args: argparse.Namespace) -> int:
         try:
             new = update_marked_block(readme.read_text(), compact_table(loaded))
         except (OSError, ValueError) as e:
-            raise CLIError(f"--update-readme {readme}: {e}") from None
+            raise UserError(f"--update-readme {readme}: {e}") from None
         atomic_write_text(readme, new)
         print(f"updated {readme}")
     if args.out:

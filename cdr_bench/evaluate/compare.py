@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
 from cdr_bench.evaluate.results import read_episodes, read_result
 
@@ -59,21 +59,21 @@ def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any
 
 
 def compare(path_a: str | os.PathLike[str], path_b: str | os.PathLike[str]) -> dict[str, Any]:
-    """Per-metric paired differences B - A; :class:`CLIError` if not on the same episodes."""
+    """Per-metric paired differences B - A; :class:`UserError` if not on the same episodes."""
     try:
         a, b = read_result(path_a), read_result(path_b)
     except ValueError as e:
-        raise CLIError(str(e)) from None
+        raise UserError(str(e)) from None
     sa = {s["id"]: s for s in a["scenarios"]}
     sb = {s["id"]: s for s in b["scenarios"]}
     if set(sa) != set(sb):
-        raise CLIError(
+        raise UserError(
             f"not the same episodes: scenarios {sorted(sa)} in {path_a} vs {sorted(sb)} in {path_b}"
         )
     for sid in sa:
         for key in ("config_hash", "episodes", "seeds_sha256"):
             if sa[sid][key] != sb[sid][key]:
-                raise CLIError(
+                raise UserError(
                     f"not the same episodes: scenario {sid} differs in {key} "
                     f"({sa[sid][key]} vs {sb[sid][key]}); run both with the same scenario "
                     "version, --episodes and --seed"
@@ -81,14 +81,14 @@ def compare(path_a: str | os.PathLike[str], path_b: str | os.PathLike[str]) -> d
     try:
         ea, eb = read_episodes(path_a, a), read_episodes(path_b, b)
     except ValueError as e:
-        raise CLIError(str(e)) from None
+        raise UserError(str(e)) from None
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     rows = []
     for sid in sa:
         xa = [e for e in ea if e["scenario"] == sid]
         xb = [e for e in eb if e["scenario"] == sid]
         if [e["seed"] for e in xa] != [e["seed"] for e in xb]:
-            raise CLIError(f"not the same episodes: per-episode seeds of {sid} differ")
+            raise UserError(f"not the same episodes: per-episode seeds of {sid} differ")
         n = len(xa)
         idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
         for role in sa[sid]["metrics"]:

@@ -1,6 +1,6 @@
 """Load an agent file (or a folder with ``agent.py``) by path; see :mod:`.protocol`.
 
-Every failure is an :class:`AgentError` (a ``CLIError``: one line, exit code 2) naming the file
+Every failure is an :class:`AgentError` (a ``UserError``: one line, exit code 2) naming the file
 and, where the agent's own code raised, the agent's own line.
 """
 
@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 _SKIP_DIRS = {"__pycache__", ".git", ".ipynb_checkpoints"}
 
 
-class AgentError(CLIError):
+class AgentError(UserError):
     """The agent could not be loaded or misbehaved; the message says where and how."""
 
 

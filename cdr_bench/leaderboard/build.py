@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.evaluate.loader import agent_files
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
@@ -123,7 +123,7 @@ def evaluate_submission(
     limits: Limits,
 ) -> float:
     """Write ``out_dir/<name>.json|.jsonl`` (and multimodality files) for one submission;
-    returns the wall time. :class:`SandboxError` / :class:`CLIError` name the submission."""
+    returns the wall time. :class:`SandboxError` / :class:`UserError` name the submission."""
     what = f"submission {sub.name} ({sub.source})"
     files = agent_files(root / sub.agent)
     problems = scan_agent_code(files)
@@ -218,7 +218,7 @@ def committed_episodes(results_dir: Path, subs: list[Submission]) -> int:
             except ValueError:
                 continue
     if len(counts) > 1:
-        raise CLIError(f"{results_dir}: results with different episode counts {sorted(counts)}")
+        raise UserError(f"{results_dir}: results with different episode counts {sorted(counts)}")
     return counts.pop() if counts else PAPER_EPISODES
 
 
@@ -463,15 +463,15 @@ def run(opts: Options) -> int:
     subs = load_submissions(lb_dir, published.names)
     names = {s.name for s in subs}
     if opts.reference not in names:
-        raise CLIError(f"reference entry {opts.reference!r} has no submission in {lb_dir}")
+        raise UserError(f"reference entry {opts.reference!r} has no submission in {lb_dir}")
     chosen = subs
     if opts.evaluate:
         unknown = sorted(set(opts.evaluate) - names)
         if unknown:
-            raise CLIError(f"--evaluate: no submission named {', '.join(unknown)}")
+            raise UserError(f"--evaluate: no submission named {', '.join(unknown)}")
         chosen = [s for s in subs if s.name in opts.evaluate]
     if opts.episodes is not None and opts.episodes < 1:
-        raise CLIError(f"--episodes must be >= 1, got {opts.episodes}")
+        raise UserError(f"--episodes must be >= 1, got {opts.episodes}")
 
     if opts.check:
         return _check(opts, lb_dir, root, results_dir, subs, chosen)
@@ -489,7 +489,7 @@ def run(opts: Options) -> int:
             _evaluate_all(chosen, opts, root, new_results, stage / "scratch", n)
             source = new_results
         elif opts.episodes is not None:
-            raise CLIError("--episodes needs --evaluate or --check (plain build only renders)")
+            raise UserError("--episodes needs --evaluate or --check (plain build only renders)")
         files = render_all(lb_dir, source, opts.reference)
         commit(lb_dir, stage, files, new_results)
     log(
@@ -511,9 +511,9 @@ def _check(
     committed_n = committed_episodes(results_dir, subs)
     n = opts.episodes or committed_n
     if n > committed_n:
-        raise CLIError(f"--episodes {n}: the committed results have only {committed_n}")
+        raise UserError(f"--episodes {n}: the committed results have only {committed_n}")
     if n != committed_n and n % DEFAULT_BATCH_SIZE:
-        raise CLIError(
+        raise UserError(
             f"--episodes {n}: a partial check runs whole batches; use a multiple of "
             f"{DEFAULT_BATCH_SIZE} (or {committed_n}, the committed count)"
         )
@@ -546,7 +546,7 @@ def _check(
                     )
         try:
             files = render_all(lb_dir, results_dir, opts.reference)
-        except CLIError as e:
+        except UserError as e:
             diffs.append(f"the committed result files do not render: {e}")
             files = None
         if files is not None:

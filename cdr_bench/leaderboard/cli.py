@@ -67,17 +67,17 @@ def register(sub: Any) -> None:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from cdr_bench.cli import CLIError
+    from cdr_bench.errors import UserError
     from cdr_bench.leaderboard.build import Options, run
     from cdr_bench.leaderboard.data import DEFAULT_REFERENCE
 
     if args.workers < 1:
-        raise CLIError(f"--workers must be >= 1, got {args.workers}")
+        raise UserError(f"--workers must be >= 1, got {args.workers}")
     if args.cpu_limit < 1 or args.memory_limit < 64 or args.timeout <= 0:
-        raise CLIError("--cpu-limit, --memory-limit (>= 64 MiB) and --timeout must be positive")
+        raise UserError("--cpu-limit, --memory-limit (>= 64 MiB) and --timeout must be positive")
     d = Path(args.dir)
     if not d.is_dir():
-        raise CLIError(f"--dir {d}: no such folder")
+        raise UserError(f"--dir {d}: no such folder")
     opts = Options(
         leaderboard_dir=d,
         evaluate=args.evaluate,

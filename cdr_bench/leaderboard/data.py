@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.evaluate.compare import compare
 from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
@@ -96,29 +96,29 @@ class Entry:
 
 def check_result(sub: Submission, path: Path) -> dict[str, Any]:
     """Read a submission's result file and check it against the submission and its own
-    per-episode file; :class:`CLIError` naming the file otherwise."""
+    per-episode file; :class:`UserError` naming the file otherwise."""
     try:
         result = read_result(path)
         episodes = read_episodes(path, result)
     except ValueError as e:
-        raise CLIError(str(e)) from None
+        raise UserError(str(e)) from None
     except (json.JSONDecodeError, KeyError, TypeError) as e:
-        raise CLIError(f"{path}: malformed result ({type(e).__name__}: {e})") from None
+        raise UserError(f"{path}: malformed result ({type(e).__name__}: {e})") from None
     ids = [s["id"] for s in result["scenarios"]]
     if ids != list(sub.scenarios):
-        raise CLIError(
+        raise UserError(
             f"{path}: scenarios {ids} but {sub.source.name} asks for {list(sub.scenarios)}; "
             f"re-evaluate: cdr-bench leaderboard build --evaluate {sub.name}"
         )
     for s in result["scenarios"]:
         eps = [e for e in episodes if e.get("scenario") == s["id"]]
         if len(eps) != s["episodes"]:
-            raise CLIError(
+            raise UserError(
                 f"{path}: {s['id']}: {len(eps)} episodes in {result['episodes_file']}, "
                 f"{s['episodes']} in the JSON"
             )
         if canonical_json(scenario_metrics(eps)) != canonical_json(s["metrics"]):
-            raise CLIError(
+            raise UserError(
                 f"{path}: {s['id']}: the metrics do not match the per-episode file "
                 f"{result['episodes_file']} (edited by hand?)"
             )
@@ -133,14 +133,14 @@ def load_multimodal(path: Path) -> dict[str, Any]:
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as e:
-        raise CLIError(f"{path}: not a multimodality file ({e})") from None
+        raise UserError(f"{path}: not a multimodality file ({e})") from None
     keys = ("scenario", "samples", "seed", "all", "success", "success_rate", "modes")
     if not isinstance(d, dict) or any(k not in d for k in keys):
-        raise CLIError(f"{path}: expected the JSON of `cdr-bench multimodal` ({', '.join(keys)})")
+        raise UserError(f"{path}: expected the JSON of `cdr-bench multimodal` ({', '.join(keys)})")
     for k in ("all", "success"):
         v = d[k]
         if not (isinstance(v, list) and len(v) == 27 and all(isinstance(x, int) for x in v)):
-            raise CLIError(f"{path}: {k}: expected 27 integer counts")
+            raise UserError(f"{path}: {k}: expected 27 integer counts")
     return d
 
 
@@ -150,7 +150,7 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
     for sub in subs:
         p = result_path(results_dir, sub.name)
         if not p.exists():
-            raise CLIError(
+            raise UserError(
                 f"{p}: no result file for submission {sub.name}; run "
                 f"`cdr-bench leaderboard build --evaluate {sub.name}`"
             )
@@ -158,7 +158,7 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
         for sc in sub.multimodality:
             mp = multimodal_path(results_dir, sub.name, sc)
             if not mp.exists():
-                raise CLIError(f"{mp}: missing; run `cdr-bench leaderboard build --evaluate`")
+                raise UserError(f"{mp}: missing; run `cdr-bench leaderboard build --evaluate`")
             e.multimodal[sc] = load_multimodal(mp)
         entries.append(e)
     known = {result_path(results_dir, s.name).name for s in subs}
@@ -168,7 +168,7 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
         if ".multimodal-" not in p.name and p.name not in known
     )
     if stale:
-        raise CLIError(f"{results_dir}: result files without a submission: {', '.join(stale)}")
+        raise UserError(f"{results_dir}: result files without a submission: {', '.join(stale)}")
     _same_episodes(entries)
     return entries
 
@@ -182,7 +182,7 @@ def _same_episodes(entries: list[Entry]) -> None:
                 first[s["id"]] = (e.sub.name, key)
             elif first[s["id"]][1] != key:
                 other = first[s["id"]][0]
-                raise CLIError(
+                raise UserError(
                     f"{e.path}: {s['id']} was not run on the same episodes as {other} "
                     f"(config hash, episodes, seeds: {key} vs {first[s['id']][1]}); "
                     "re-evaluate with `cdr-bench leaderboard build --evaluate`"
@@ -208,7 +208,7 @@ def build_data(
     by_name = {e.sub.name: e for e in entries}
     ref = by_name.get(reference)
     if ref is None:
-        raise CLIError(
+        raise UserError(
             f"reference entry {reference!r} has no submission (entries: {', '.join(by_name)})"
         )
     scenario_ids: list[str] = []
@@ -223,7 +223,7 @@ def build_data(
             continue
         shared = [s for s in e.result["scenarios"] if ref.scenario(s["id"]) is not None]
         if len(shared) != len(e.result["scenarios"]) or len(shared) != len(ref.result["scenarios"]):
-            raise CLIError(
+            raise UserError(
                 f"{e.sub.name}: scored on other scenarios than the reference {reference}; "
                 "paired comparison needs the same scenarios"
             )

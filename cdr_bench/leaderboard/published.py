@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 # published column -> our metric key (None: no counterpart)
 METRIC_OF_COLUMN: dict[str, str] = {
@@ -62,15 +62,15 @@ def _load(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as e:
-        raise CLIError(f"{path}: cannot read published numbers ({e})") from None
+        raise UserError(f"{path}: cannot read published numbers ({e})") from None
     if not isinstance(data, dict) or not {"citation", "columns", "rows"} <= set(data):
-        raise CLIError(f"{path}: expected citation, columns and rows")
+        raise UserError(f"{path}: expected citation, columns and rows")
     for col in data["columns"]:
         if col not in METRIC_OF_COLUMN:
-            raise CLIError(f"{path}: unknown column {col!r}")
+            raise UserError(f"{path}: unknown column {col!r}")
     for i, r in enumerate(data["rows"]):
         if len(r.get("values", [])) != len(data["columns"]):
-            raise CLIError(f"{path}: rows[{i}]: expected {len(data['columns'])} values")
+            raise UserError(f"{path}: rows[{i}]: expected {len(data['columns'])} values")
     return data
 
 

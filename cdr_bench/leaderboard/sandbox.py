@@ -33,10 +33,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 
-class SandboxError(CLIError):
+class SandboxError(UserError):
     """A sandboxed run failed; the message says which submission, why, and its last output."""
 
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import yaml
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
@@ -38,7 +38,7 @@ CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
 ``weights_only=True``, safetensors, ``numpy.load`` with ``allow_pickle=False``)."""
 
 
-class SubmissionError(CLIError):
+class SubmissionError(UserError):
     """A submission file is invalid; the message names the file, the field and what was
     expected."""
 
@@ -264,8 +264,8 @@ def load_submissions(
     sub = d / "submissions"
     files = sorted(sub.glob("*.yaml")) if sub.is_dir() else []
     if not files:
-        raise CLIError(f"{sub}: no submission files (*.yaml)")
+        raise UserError(f"{sub}: no submission files (*.yaml)")
     others = sorted(p.name for p in sub.iterdir() if p.suffix in (".yml", ".json"))
     if others:
-        raise CLIError(f"{sub}: submissions are .yaml files; rename {', '.join(others)}")
+        raise UserError(f"{sub}: submissions are .yaml files; rename {', '.join(others)}")
     return [load_submission(f, d.resolve().parent, published_names) for f in files]

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from cdr_bench.errors import UserError
+
 TRAINERS: dict[str, str] = {
     "diffusion-ac": "cdr_bench.rl.train_diffusion_ac",
     "ppo": "cdr_bench.rl.train_ppo",
@@ -27,19 +29,6 @@ TRAINERS: dict[str, str] = {
 }
 """``cdr-bench train NAME``: trainer modules. Each exposes ``add_arguments(parser)`` (its flags)
 and ``run(namespace) -> dict`` (train, write the run directory, return a JSON summary)."""
-
-
-class _CLIErrorFallback(Exception):
-    pass
-
-
-def _cli_error() -> type[Exception]:
-    try:
-        from cdr_bench.cli import CLIError
-
-        return CLIError
-    except ImportError:  # pragma: no cover
-        return _CLIErrorFallback
 
 
 def register(sub: Any) -> None:
@@ -96,7 +85,7 @@ def register(sub: Any) -> None:
 
 def _missing_extra(name: str, missing: str) -> Any:
     def fail(ns: argparse.Namespace) -> int:
-        raise _cli_error()(
+        raise UserError(
             f"training {name} needs {missing!r}: pip install torch==2.13.0 'cdr-bench[train]'"
         )
 
@@ -108,7 +97,7 @@ def _train_with(module: Any) -> Any:
         try:
             summary = module.run(ns)
         except ValueError as e:
-            raise _cli_error()(str(e)) from None
+            raise UserError(str(e)) from None
         print(json.dumps(summary, indent=1))
         return 0
 
@@ -118,12 +107,12 @@ def _train_with(module: Any) -> Any:
 def _load(agent: str, scenario: str = "medium"):
     """The agent at ``agent`` (a folder with agent.py or a .py file), constructed with the
     observation and action spaces of ``scenario`` as the evaluator does, so that any protocol
-    agent loads (classical agents read the spaces). Every failure is a one-line CLIError."""
+    agent loads (classical agents read the spaces). Every failure is a one-line UserError."""
     from cdr_bench.evaluate.loader import load_agent
     from cdr_bench.evaluate.runner import spaces_for
     from cdr_bench.scenarios import load_scenario
 
-    err = _cli_error()
+    err = UserError
     try:
         obs_space, act_space = spaces_for(load_scenario(scenario))
     except Exception as e:
@@ -132,7 +121,7 @@ def _load(agent: str, scenario: str = "medium"):
         return load_agent(agent, obs_space, act_space)
     except err:
         raise
-    except Exception as e:  # anything the loader did not already turn into a CLIError
+    except Exception as e:  # anything the loader did not already turn into a UserError
         msg = str(e).splitlines()[0] if str(e) else ""
         raise err(f"agent {agent}: {type(e).__name__}: {msg}") from None
 
@@ -143,7 +132,7 @@ def _check_scenario(name: str) -> None:
     try:
         load_scenario(name)
     except Exception as e:
-        raise _cli_error()(f"scenario {name!r}: {e}") from None
+        raise UserError(f"scenario {name!r}: {e}") from None
 
 
 def first_action_distribution(
@@ -252,7 +241,7 @@ def heatmap(
 
 
 def cmd_multimodal(ns: argparse.Namespace) -> int:
-    err = _cli_error()
+    err = UserError
     if ns.samples < 1:
         raise err("--samples must be >= 1")
     _check_scenario(ns.scenario)
@@ -306,7 +295,7 @@ def cmd_latency(ns: argparse.Namespace) -> int:
         torch.set_num_threads(ns.threads)
     except ImportError:  # pragma: no cover
         pass
-    err = _cli_error()
+    err = UserError
     try:
         sizes = [int(x) for x in ns.batch_sizes.split(",")]
     except ValueError:
@@ -358,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     try:
         return ns.func(ns)
-    except _cli_error() as e:
+    except UserError as e:
         print(f"error: {e}")
         return 2
 

@@ -61,21 +61,21 @@ def register(sub: Any) -> None:
 def _sweep(args: argparse.Namespace) -> int:
     import yaml
 
-    from cdr_bench.cli import CLIError
+    from cdr_bench.errors import UserError
     from cdr_bench.scale.config import load_sweep
 
     overrides: dict[str, Any] = {}
     for item in args.set:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise CLIError(f"--set {item!r}: expected FLAG=VALUE")
+            raise UserError(f"--set {item!r}: expected FLAG=VALUE")
         overrides[key] = yaml.safe_load(value)
     seeds = None
     if args.seeds is not None:
         try:
             seeds = [int(x) for x in args.seeds.split(",")]
         except ValueError:
-            raise CLIError(f"--seeds {args.seeds!r}: expected integers like 1,2,3") from None
+            raise UserError(f"--seeds {args.seeds!r}: expected integers like 1,2,3") from None
     sweep = load_sweep(
         args.sweep,
         total_steps=args.total_steps,

@@ -33,7 +33,7 @@ from typing import Any
 
 import yaml
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 RESERVED_FLAGS = ("run-dir", "seed", "total-steps", "max-wall-minutes", "resume", "progress")
 """Set by the sweep itself; a sweep file may not set them as hyper-parameters."""
@@ -115,8 +115,8 @@ def _sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _err(source: Path, where: str, msg: str) -> CLIError:
-    return CLIError(f"{source}: {where}: {msg}")
+def _err(source: Path, where: str, msg: str) -> UserError:
+    return UserError(f"{source}: {where}: {msg}")
 
 
 def _mapping(source: Path, where: str, value: Any, allowed: set[str] | None) -> dict[str, Any]:
@@ -198,9 +198,9 @@ def load_sweep(
     try:
         raw = yaml.safe_load(source.read_text(encoding="utf-8"))
     except OSError as e:
-        raise CLIError(f"{source}: cannot read: {e.strerror}") from None
+        raise UserError(f"{source}: cannot read: {e.strerror}") from None
     except yaml.YAMLError as e:
-        raise CLIError(f"{source}: not valid YAML: {str(e).splitlines()[0]}") from None
+        raise UserError(f"{source}: not valid YAML: {str(e).splitlines()[0]}") from None
     raw = _mapping(source, "", raw, _TOP_KEYS)
     for req in ("name", "agent", "seeds", "budget", "evaluation"):
         if req not in raw:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 METRICS: tuple[tuple[str, str], ...] = (
     ("success", "success rate"),
@@ -54,7 +54,7 @@ def collect(sweep_dir: Path) -> dict[str, Any]:
         res = json.loads((tj.parent / rec["result"]).read_text())
         trials.append((rec, trial_metrics(res)))
     if not trials:
-        raise CLIError(f"{sweep_dir}: no finished trials (*/trial.json)")
+        raise UserError(f"{sweep_dir}: no finished trials (*/trial.json)")
     # the centre point's value of each factor: the flags its "default" trials were trained with
     fixed: dict[str, Any] = next(
         (r["train_flags"] for r, _ in trials if r["factor"] == "default"), {}

@@ -13,7 +13,7 @@ import os
 from collections.abc import Iterator
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 
 
 def run_tasks_on_ray(
@@ -24,7 +24,7 @@ def run_tasks_on_ray(
     try:
         import ray
     except ImportError:
-        raise CLIError('--backend ray needs Ray: pip install "cdr-bench[ray]"') from None
+        raise UserError('--backend ray needs Ray: pip install "cdr-bench[ray]"') from None
     from cdr_bench.evaluate.runner import run_batch_task
     from cdr_bench.scale.sweep import ray_init
 

@@ -39,7 +39,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.scale.config import Sweep, Trial
 
 TRIAL_FILE = "trial.json"
@@ -151,14 +151,14 @@ def run_sweep(
 ) -> dict[str, Any]:
     """Run every unfinished trial of ``sweep`` on Ray; write ``<out>/sweep.json``.
 
-    Raises :class:`CLIError` when ``out`` already holds trials and ``resume`` is false, or when
+    Raises :class:`UserError` when ``out`` already holds trials and ``resume`` is false, or when
     trials failed (after the finished ones were published)."""
     from cdr_bench.evaluate.results import atomic_write_text
 
     out = Path(out).resolve()
     done = [t for t in sweep.trials if trial_done(out, t)]
     if done and not resume:
-        raise CLIError(
+        raise UserError(
             f"{out} already holds {len(done)} finished trial(s) of this sweep; "
             "add --resume to run only the missing ones (or choose another --out)"
         )
@@ -196,7 +196,7 @@ def run_sweep(
     atomic_write_text(out / "sweep.json", json.dumps(summary, indent=1) + "\n")
     if failures:
         first = next(iter(failures.values()))
-        raise CLIError(
+        raise UserError(
             f"{len(failures)} of {len(sweep.trials)} trials failed (see {out}/sweep.json); "
             f"the others are kept; first: {first.splitlines()[0]}"
         )
@@ -214,7 +214,7 @@ def _run_on_ray(
     try:
         import ray
     except ImportError:
-        raise CLIError('cdr-bench sweep needs Ray: pip install "cdr-bench[ray]"') from None
+        raise UserError('cdr-bench sweep needs Ray: pip install "cdr-bench[ray]"') from None
     import logging
 
     started = not ray.is_initialized()
@@ -276,4 +276,4 @@ def ray_init(ray: Any, address: str | None, num_cpus: int | None) -> None:
     try:
         ray.init(**kw)
     except (ConnectionError, RuntimeError, ValueError) as e:
-        raise CLIError(f"cannot start or reach Ray at {address or 'local'}: {e}") from None
+        raise UserError(f"cannot start or reach Ray at {address or 'local'}: {e}") from None

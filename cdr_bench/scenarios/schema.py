@@ -20,20 +20,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Union
 
-
-class ScenarioError(ValueError):
-    """A scenario file or mapping is invalid.
-
-    The message names the source (file), the dotted field path and what was expected.
-    """
-
-    def __init__(self, source: str, path: str, message: str):
-        self.source = source
-        self.path = path
-        self.message = message
-        where = f"{source}: " if source else ""
-        field_part = f"field '{path}': " if path else ""
-        super().__init__(f"{where}{field_part}{message}")
+from cdr_bench.errors import ScenarioError
 
 
 def _spec(doc: str, lo: float | None = None, hi: float | None = None, **kw: Any) -> Any:

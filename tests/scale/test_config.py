@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from cdr_bench.cli import CLIError
+from cdr_bench.errors import UserError
 from cdr_bench.scale.config import load_sweep
 
 from .helpers import REPO, tiny_sweep
@@ -44,7 +44,7 @@ def _edit(path: Path, **changes) -> Path:
 )
 def test_rejects_with_file_and_field(tmp_path, changes, words):
     path = _edit(tiny_sweep(tmp_path, [1]), **changes)
-    with pytest.raises(CLIError) as e:
+    with pytest.raises(UserError) as e:
         load_sweep(path)
     msg = str(e.value)
     assert "\n" not in msg
@@ -141,7 +141,7 @@ def test_reduced_run_overrides(tmp_path):
     assert t.train_flags["learning-starts"] == 10
     assert t.evaluation == {"scenarios": ["low"], "episodes": 1, "seed": 0}
     assert t.key not in {b.key for b in base.trials}
-    with pytest.raises(CLIError, match="fixed.nope"):
+    with pytest.raises(UserError, match="fixed.nope"):
         load_sweep(path, overrides={"nope": 1})
 
 
@@ -160,5 +160,5 @@ def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(tmp_path):
     )
     (t,) = load_sweep(path).trials
     assert t.evaluation["scenarios"] == [str((tmp_path / "scen" / "mine.yaml").resolve())]
-    with pytest.raises(CLIError, match="fixed: expected a mapping"):
+    with pytest.raises(UserError, match="fixed: expected a mapping"):
         load_sweep(_edit(path, fixed=[1]))

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("ray")
 
-from cdr_bench.cli import CLIError  # noqa: E402
+from cdr_bench.errors import UserError  # noqa: E402
 from cdr_bench.evaluate.api import evaluate, resolve_jobs  # noqa: E402
 from cdr_bench.scale.config import load_sweep  # noqa: E402
 from cdr_bench.scale.plot import plot_sweep  # noqa: E402
@@ -48,7 +48,7 @@ def test_sweep_runs_and_resumes(local_ray, tmp_path):
         [t.key for t in sweep.trials] + ["sweep.json", "sweep.yaml"]
     )
 
-    with pytest.raises(CLIError, match="--resume"):
+    with pytest.raises(UserError, match="--resume"):
         run_sweep(sweep, out, progress=False)
     # a third seed: --resume runs only it, the finished trials stay untouched
     stamps = {t.key: os.stat(out / t.key / TRIAL_FILE).st_mtime_ns for t in sweep.trials}
@@ -66,7 +66,7 @@ def test_failed_trial_is_reported_and_others_kept(local_ray, tmp_path):
     # width 12 is not divisible by the 8 attention heads: the trainer fails at start-up
     sweep = load_sweep(tiny_sweep(tmp_path, [1], grid={"width": [16, 12]}))
     out = tmp_path / "out"
-    with pytest.raises(CLIError, match="1 of 2 trials failed"):
+    with pytest.raises(UserError, match="1 of 2 trials failed"):
         run_sweep(sweep, out, progress=False)
     summary = json.loads((out / "sweep.json").read_text())
     good, bad = sweep.trials
@@ -93,5 +93,5 @@ def test_evaluate_ray_backend_equals_local(local_ray, tmp_path):
     assert b["timing"]["backend"] == "ray" and a["timing"]["backend"] == "local"
     assert _strip(tmp_path / "local.json") == _strip(tmp_path / "ray.json")
     assert (tmp_path / "local.jsonl").read_bytes() == (tmp_path / "ray.jsonl").read_bytes()
-    with pytest.raises(CLIError, match="--address needs --backend ray"):
+    with pytest.raises(UserError, match="--address needs --backend ray"):
         evaluate(agent, jobs, tmp_path / "x.json", address="127.0.0.1:1", progress=False)
