@@ -1,6 +1,6 @@
 """Scoring agents: the agent protocol, the loader, the lock-step episode runner, the metrics of
-SPEC §4, result files and paired comparison. ``cdr-bench evaluate`` / ``compare`` / ``report``
-are thin wrappers over these functions.
+docs/model.md §10, result files and paired comparison. ``cdr-bench evaluate`` / ``compare`` /
+``report`` are thin wrappers over these functions.
 
 This package never imports torch (a test enforces it); an agent file may.
 """

@@ -1,4 +1,4 @@
-"""The metrics of SPEC §4 from per-episode logs, with 95 % intervals.
+"""The metrics of docs/model.md §10 from per-episode logs, with 95 % intervals.
 
 Input: per-aircraft episode records (one dict per aircraft and episode, as written to the
 per-episode JSONL) with ``outcome`` (``success``, ``nmac``, ``los``, ``boundary``, ``timeout``),

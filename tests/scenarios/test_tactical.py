@@ -1,4 +1,4 @@
-"""The tactical scenarios of Fig. 8 are real dilemmas (SPEC §3), certified by search.
+"""The tactical scenarios of Fig. 8 are real dilemmas (docs/model.md §8), certified by search.
 
 For each scenario: (a) holding course, speed and level fails; (b) at least three distinct first
 actions lead to success, spanning at least two of climb / level / descend. Every witness found
