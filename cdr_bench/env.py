@@ -11,19 +11,11 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from cdr_bench.actions import HOLD, N_ACTIONS, action_mask
-from cdr_bench.scenarios import ScenarioConfig, load_scenario
-from cdr_bench.sim import (
-    OUTCOME_NAMES,
-    REWARD_TERMS,
-    Simulator,
-    SingleStepResult,
-    observation_bounds,
-    observe_one,
-)
-from cdr_bench.sim.core import GOAL_TERMS, N_LEVELS, SAFETY_TERMS
+from cdr_bench.actions import HOLD, N_ACTIONS
+from cdr_bench.scenarios import ScenarioConfig
+from cdr_bench.sim import OUTCOME_NAMES, REWARD_TERMS, StepResult
+from cdr_bench.vector_env import VectorEnv
 
-_MASKS = [action_mask(level) for level in range(N_LEVELS)]  # (27,) int8 per level
 _STATE_AC = 8  # x, y, vx, vy, level, active, goal_x, goal_y
 _STATE_BG = 6  # x, y, vx, vy, level, active
 
@@ -191,33 +183,38 @@ class CDREnv(ParallelEnv):
                     "render_mode='human' draws in a matplotlib window: pip install matplotlib "
                     "(or use render_mode='rgb_array')"
                 ) from None
-        self.config = load_scenario(scenario, **overrides)
+        self.vector = VectorEnv(scenario, num_envs=1, **overrides)
+        self.config = self.vector.config
         self.render_mode = render_mode
-        self.sim = Simulator(self.config, n_episodes=1)
-        n = self.config.n_learning_intruders
-        self.possible_agents = ["ownship_0"] + [f"intruder_{i}" for i in range(n)]
+        self.possible_agents = list(self.vector.agent_ids)
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        low, high = observation_bounds(self.config)
+        space = self.vector.single_observation_space
         self.observation_spaces: dict[str, spaces.Dict] = {
             a: spaces.Dict(
                 {
-                    "observation": spaces.Box(low, high, dtype=np.float32),
+                    "observation": space["observation"],
                     "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8),
                 }
             )
             for a in self.possible_agents
         }
         self.action_spaces = {a: spaces.Discrete(N_ACTIONS) for a in self.possible_agents}
-        B, M = self.sim.B, self.sim.M
+        sim = self.vector.sim
+        B, M = sim.B, sim.M
         big = np.float32(1e4)
         self.state_space = spaces.Box(-big, big, (M * _STATE_AC + B * _STATE_BG,), np.float32)
         self._bg_ids = [f"bg_{b}" for b in range(B)]
-        self._hold_list = [HOLD] * M
+        self._hold = np.full((1, M), HOLD, dtype=np.int64)
         self._seed_stream = np.random.default_rng()
         self._trail: list[tuple[float, float]] = []
-        self._last_result: SingleStepResult | None = None
+        self._last_result: StepResult | None = None
         self._renderer: Any = None
+
+    @property
+    def sim(self) -> Any:
+        """The simulator of the episode (a batch of one), for rendering and inspection."""
+        return self.vector.sim
 
     # -- spaces (cached: the same object every call) ----------------------------------------
 
@@ -241,59 +238,64 @@ class CDREnv(ParallelEnv):
         if episode_seed is None:
             episode_seed = int(self._seed_stream.integers(2**63))
         self.episode_seed = int(episode_seed)
-        self.sim.reset([self.episode_seed])
+        obs, masks = self.vector.reset(seeds=[self.episode_seed])
         self.agents = list(self.possible_agents)
         self._last_result = None
-        self._trail = [tuple(self.sim.ac_pos_km[0, 0].tolist())]
-        obs = self._observations(self.agents)
+        self._trail = [tuple(self.vector.sim.ac_pos_km[0, 0].tolist())]
+        out = self._observations(self.agents, obs, masks)
         infos = {a: {"episode_seed": self.episode_seed} for a in self.agents}
         if self.render_mode == "human":
             self.render()
-        return obs, infos
+        return out, infos
 
     def step(
         self, actions: dict[str, Any]
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, Any]]:
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
-        sim = self.sim
-        act = self._hold_list.copy()
+        act = self._hold.copy()
         for agent in self.agents:
             if agent not in actions:
                 raise ValueError(f"missing action for live agent {agent!r}")
-            act[self._index[agent]] = _check_action(agent, actions[agent])
-        acting = list(self.agents)
-        res = sim.step_one(act)
+            act[0, self._index[agent]] = _check_action(agent, actions[agent])
+        acting = self.agents
+        out = self.vector.step(act)
+        res = out.result
         self._last_result = res
-        own = sim._one.pc.item(sim.B)  # the ownship, as a complex number
-        self._trail.append((own.real, own.imag))
-        obs = self._observations(acting)
+        own = self.vector.sim.pos_km[0, self.vector.sim.B].tolist()
+        self._trail.append((own[0], own[1]))
+        obs = self._observations(acting, out.obs, out.action_mask)
         rewards, terms, truncs, infos = {}, {}, {}, {}
-        step = sim.steps.item(0)
+        step = int(self.vector.sim.steps[0])
+        terms_rows = res.terms[0].tolist()
+        flags = res.flags[0].tolist()
+        min_sep = res.min_sep_km[0].tolist()
+        outcome = res.outcome[0].tolist()
         finished = False
         for agent in acting:
             m = self._index[agent]
-            rt = res.rewards[m]  # a fresh dict of floats
-            g = sum(map(rt.__getitem__, GOAL_TERMS))
-            s = sum(map(rt.__getitem__, SAFETY_TERMS))
+            row = terms_rows[m]  # REWARD_TERMS: the first five are R_G, the last two R_S
+            g = row[0] + row[1] + row[2] + row[3] + row[4]
+            s = row[5] + row[6]
             rewards[agent] = g + s
-            terms[agent] = term = res.terminated[m]
-            truncs[agent] = trunc = res.truncated[m]
+            _, invalid, outside, _, term, trunc = flags[m]
+            terms[agent] = term
+            truncs[agent] = trunc
             info: dict[str, Any] = {
-                "reward_terms": rt,
+                "reward_terms": dict(zip(REWARD_TERMS, row, strict=True)),
                 "goal_reward": g,
                 "safety_reward": s,
                 "los_with": self._partners(res.los_with[0, m] & ~res.nmac_with[0, m])
-                if rt["los"]
+                if row[5]
                 else [],
-                "nmac_with": self._partners(res.nmac_with[0, m]) if rt["nmac"] else [],
-                "invalid_action": res.invalid_action[m],
-                "outside": res.outside[m],
-                "min_separation_km": res.min_sep_km[m],
+                "nmac_with": self._partners(res.nmac_with[0, m]) if row[6] else [],
+                "invalid_action": invalid,
+                "outside": outside,
+                "min_separation_km": min_sep[m],
                 "step": step,
             }
             if term or trunc:
-                info["outcome"] = OUTCOME_NAMES[res.outcome[m]]
+                info["outcome"] = OUTCOME_NAMES[outcome[m]]
                 finished = True
             infos[agent] = info
         if finished:
@@ -304,28 +306,25 @@ class CDREnv(ParallelEnv):
 
     def _partners(self, row: NDArray[np.bool_]) -> list[str]:
         idx = np.flatnonzero(row)
-        B = self.sim.B
+        B = self.vector.sim.B
         return [self._bg_ids[i] if i < B else self.possible_agents[i - B] for i in idx]
 
-    def _observations(self, agents: list[str]) -> dict[str, dict[str, NDArray[Any]]]:
-        o = observe_one(self.sim)
-        level = self.sim._one.level[self.sim.B :].tolist()
+    def _observations(
+        self, agents: list[str], obs: NDArray[np.float32], masks: NDArray[np.int8]
+    ) -> dict[str, dict[str, NDArray[Any]]]:
         return {
-            a: {
-                "observation": o[self._index[a]],
-                "action_mask": _MASKS[level[self._index[a]]].copy(),
-            }
+            a: {"observation": obs[0, self._index[a]], "action_mask": masks[0, self._index[a]]}
             for a in agents
         }
 
     def state(self) -> NDArray[np.float32]:
         """Global state, float32: per controlled aircraft (x, y, vx, vy, level, active, goal x,
         goal y) then per background slot (x, y, vx, vy, level, active); km, km/s."""
-        s = self.sim
+        s = self.vector.sim
         ac = np.concatenate(
             [
                 s.ac_pos_km[0],
-                s.velocities_km_s()[0],
+                s.ac_vel_km_s[0],
                 s.ac_level[0, :, None],
                 s.ac_active[0, :, None],
                 s.ac_goal_km[0],
@@ -345,7 +344,7 @@ class CDREnv(ParallelEnv):
             return None
         from cdr_bench.render import draw_frame
 
-        frame = draw_frame(self.sim, self._trail, self._last_result)
+        frame = draw_frame(self.vector.sim, self._trail, self._last_result)
         if self.render_mode == "rgb_array":
             return frame
         from cdr_bench.render import HumanWindow

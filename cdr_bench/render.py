@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw
 
-from cdr_bench.sim.core import Simulator, SingleStepResult, StepResult
+from cdr_bench.sim.core import Simulator, StepResult
 
 LEVEL_COLOURS = [(66, 133, 244), (52, 168, 83), (251, 140, 0)]  # level 0, 1, 2
 SIZE_PX = 512
@@ -20,7 +20,7 @@ MARGIN_PX = 24
 def draw_frame(
     sim: Simulator,
     trail: Sequence[Sequence[float]] | None = None,
-    last: StepResult | SingleStepResult | None = None,
+    last: StepResult | None = None,
     episode: int = 0,
 ) -> NDArray[np.uint8]:
     """RGB frame (H, W, 3) uint8 of episode ``episode`` of ``sim``."""
@@ -66,7 +66,7 @@ def draw_frame(
         )
     if trail and len(trail) > 1:
         d.line([px(p) for p in trail], fill=(120, 0, 140), width=2)
-    vel = sim.velocities_km_s()[episode]
+    vel = sim.ac_vel_km_s[episode]
     for m in range(sim.M):
         gx, gy = px(sim.ac_goal_km[episode, m])
         col = (120, 0, 140) if m == 0 else (90, 90, 90)

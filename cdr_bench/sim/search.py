@@ -1,7 +1,7 @@
 """Search over ownship action sequences: which first actions can still lead to success?
 
-Used to certify the tactical scenarios (SPEC §3: holding fails, several first actions succeed)
-and, later, to label first actions in the multimodality analysis (SPEC §4).
+Used to certify the tactical scenarios (docs/model.md §8: holding fails, several first actions
+succeed) and to label first actions in the multimodality analysis (docs/model.md §10).
 
 The search is a fixed family of *follow-on* policies played after a given first action, all
 rolled out in parallel in one batched :class:`~cdr_bench.sim.core.Simulator` (one episode per
@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from cdr_bench.actions import HOLD, N_ACTIONS, action_mask
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim.core import OUTCOME_NAMES, RUNNING, SUCCESS, Simulator
-from cdr_bench.sim.geometry import bearing_deg
+from cdr_bench.sim.geometry import exact_unit_vector
 
 TURN_STEPS = (1, 2, 3, 4, 6, 8)
 """Lengths of the turn phase, steps (a turn of k steps changes the heading by 5 k deg)."""
@@ -82,11 +82,17 @@ def _follow_on_actions(
     """Ownship action of every episode ``j`` steps after the first action, shape (E,)."""
     turning = j < family["turn_steps"]
     steering = j >= family["turn_steps"] + family["hold_steps"]
-    pos, goal = sim.ac_pos_km[:, 0], sim.ac_goal_km[:, 0]
-    to_goal = bearing_deg(goal[:, 0] - pos[:, 0], goal[:, 1] - pos[:, 1])
-    off = (to_goal - sim.ac_heading_deg[:, 0] + 180.0) % 360.0 - 180.0  # + : goal to the right
-    half_turn = 0.5 * sim.heading_step_deg
-    steer = np.where(off > half_turn, 1, np.where(off < -half_turn, -1, 0))
+    # Steer when the goal is more than half a heading step off the nose: with the goal vector g
+    # and the heading vector u, cross = |g| sin(off) and dot = |g| cos(off), and off > half
+    # exactly when sin(off - half) > 0 with sin(off) > 0 (no angle is computed).
+    g = sim.ac_goal_km[:, 0] - sim.ac_pos_km[:, 0]
+    u = sim.ac_dir[:, 0]
+    cross = g[:, 0] * u[:, 1] - g[:, 1] * u[:, 0]  # + : goal to the right
+    dot = g[:, 0] * u[:, 0] + g[:, 1] * u[:, 1]
+    s_half, c_half = exact_unit_vector(0.5 * sim.heading_step_deg)
+    right = (cross > 0.0) & (cross * c_half - dot * s_half > 0.0)
+    left = (cross < 0.0) & (-cross * c_half - dot * s_half > 0.0)
+    steer = np.where(right, 1, np.where(left, -1, 0))
     a_psi = np.where(turning, family["turn"], np.where(steering, steer, 0))
     dv = family["speed_kt"] - sim.ac_speed_kt[:, 0]
     a_v = np.where(np.abs(dv) > 0.5 * sim.speed_step_kt, np.sign(dv), 0)

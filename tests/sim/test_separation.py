@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cdr_bench import actions
 from cdr_bench.sim import Simulator
@@ -49,14 +51,31 @@ def encounter(
 
 
 def test_closest_approach_closed_form():
-    d, t = closest_approach(np.array([10.0, 3.0]), np.array([-1.0, 0.0]), 30.0)
+    d, t = closest_approach(10.0, 3.0, -1.0, 0.0, 30.0)
     assert d == pytest.approx(3.0) and t == pytest.approx(10.0)
-    d, t = closest_approach(np.array([10.0, 3.0]), np.array([-1.0, 0.0]), 5.0)  # clipped
+    d, t = closest_approach(10.0, 3.0, -1.0, 0.0, 5.0)  # clipped
     assert d == pytest.approx(np.hypot(5.0, 3.0)) and t == 5.0
-    d, t = closest_approach(np.array([10.0, 3.0]), np.array([1.0, 0.0]), 30.0)  # diverging
+    d, t = closest_approach(10.0, 3.0, 1.0, 0.0, 30.0)  # diverging
     assert d == pytest.approx(np.hypot(10.0, 3.0)) and t == 0.0
-    d, t = closest_approach(np.array([4.0, 3.0]), np.array([0.0, 0.0]), 30.0)  # static
+    d, t = closest_approach(4.0, 3.0, 0.0, 0.0, 30.0)  # static
     assert d == pytest.approx(5.0) and t == 0.0
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    p=st.tuples(*[st.floats(-500, 500)] * 2),
+    v=st.tuples(*[st.floats(-0.5, 0.5)] * 2),
+    horizon=st.floats(0.0, 600.0),
+)
+def test_closest_approach_is_the_minimum_over_the_interval(p, v, horizon):
+    # The closed form against a dense sampling of the segment: never above any sample, and
+    # the time returned attains the distance returned.
+    d, t = closest_approach(p[0], p[1], v[0], v[1], horizon)
+    ts = np.linspace(0.0, horizon, 2001)
+    sampled = np.hypot(p[0] + v[0] * ts, p[1] + v[1] * ts)
+    assert 0.0 <= t <= horizon
+    assert d <= sampled.min() + 1e-9
+    assert d == pytest.approx(np.hypot(p[0] + v[0] * t, p[1] + v[1] * t), abs=1e-9)
 
 
 def test_head_on_pass_through_between_step_ends_is_nmac():

@@ -1,0 +1,195 @@
+"""The batched environment: ``num_envs`` episodes of one scenario in lock-step, arrays in and out.
+
+Everything steps through it: the PettingZoo :class:`~cdr_bench.env.CDREnv` and the Gymnasium
+``Ownship-v0`` are its batch of one, the Gymnasium vector env (``gymnasium.make_vec(...,
+vectorization_mode="vector_entry_point")``) a batch of N with auto-reset, and the evaluator,
+the trainers, the tactical search and the first-action analysis use it directly.
+
+============  ===================================================================================
+what          shape and meaning
+============  ===================================================================================
+agents        ``M`` controlled aircraft per episode: ``ownship_0`` (m = 0), then ``intruder_0..``
+actions       ``(E, M)`` integers 0..26 (:mod:`cdr_bench.actions`); ignored for aircraft not flying
+observations  ``(E, M, F)`` float32, the layout of :mod:`cdr_bench.sim.observation`
+action masks  ``(E, M, 27)`` int8, 1 = feasible
+rewards       ``(E, M)`` float64, the sum of the 7 named terms (``step.result.terms``)
+auto-reset    optional: an episode whose last aircraft finished restarts within the same step;
+              the observation it ended with is in ``final_obs``
+============  ===================================================================================
+
+Episode seeds: :meth:`VectorEnv.reset` takes one seed per episode (``seeds=``), or draws them from
+a stream seeded by ``seed=``; auto-reset draws from the same stream. The seed of the episode in
+slot ``e`` is ``episode_seeds[e]``. No mutable state is shared between instances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from cdr_bench.actions import N_ACTIONS
+from cdr_bench.scenarios import ScenarioConfig, load_scenario
+from cdr_bench.sim import Simulator, StepResult, observation_bounds, observe
+from cdr_bench.sim.core import TIMEOUT
+
+SEED_BOUND = 2**63
+"""Episode seeds drawn from a stream are integers in 0..2**63-1."""
+
+
+def agent_ids(config: ScenarioConfig) -> list[str]:
+    """Agent names of the controlled aircraft, in simulator order (m = 0, 1, ...)."""
+    return ["ownship_0"] + [f"intruder_{i}" for i in range(config.n_learning_intruders)]
+
+
+def observation_space(config: ScenarioConfig) -> spaces.Dict:
+    """The per-agent observation space: ``observation`` Box(F,) float32 and ``action_mask``
+    Box(27,) int8."""
+    low, high = observation_bounds(config)
+    return spaces.Dict(
+        {
+            "observation": spaces.Box(low, high, dtype=np.float32),
+            "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8),
+        }
+    )
+
+
+@dataclass(frozen=True)
+class VectorStep:
+    """What :meth:`VectorEnv.step` returns; every array is fresh."""
+
+    obs: NDArray[np.float32]
+    """(E, M, F) observations now (of the new episode where one auto-reset)"""
+    action_mask: NDArray[np.int8]
+    """(E, M, 27) feasible actions now"""
+    reward: NDArray[np.float64]
+    """(E, M) reward of the step (0 for aircraft that did not fly)"""
+    terminated: NDArray[np.bool_]
+    """(E, M) the aircraft's flight ended this step (success, LoS, NMAC, boundary)"""
+    truncated: NDArray[np.bool_]
+    """(E, M) the horizon ended the aircraft's flight this step (timeout)"""
+    result: StepResult
+    """everything the simulator reports of the step (named reward terms, events, outcomes)"""
+    episode_done: NDArray[np.bool_]
+    """(E,) the episode's last aircraft finished this step"""
+    final_obs: NDArray[np.float32]
+    """(E, M, F) observations at the end of the step, before any auto-reset (``obs`` itself
+    when nothing was reset)"""
+    final_episode_seeds: NDArray[np.uint64]
+    """(E,) seed of the episode each slot held during the step"""
+
+
+class VectorEnv:
+    """``num_envs`` episodes of one scenario in lock-step (see the module docstring).
+
+    Args:
+        scenario: a registry name, a YAML path or a :class:`ScenarioConfig`.
+        num_envs: episodes stepped together (E).
+        autoreset: restart an episode in the step its last aircraft finishes.
+        seed: seeds the stream of episode seeds (``reset(seed=...)`` re-seeds it).
+        overrides: nested scenario fields, validated like YAML.
+    """
+
+    def __init__(
+        self,
+        scenario: str | ScenarioConfig = "medium",
+        num_envs: int = 1,
+        *,
+        autoreset: bool = False,
+        seed: int | None = None,
+        **overrides: Any,
+    ):
+        self.config = load_scenario(scenario, **overrides)
+        self.sim = Simulator(self.config, n_episodes=num_envs)
+        self.num_envs = num_envs
+        self.n_agents = self.sim.M
+        self.agent_ids = agent_ids(self.config)
+        self.autoreset = autoreset
+        self.single_observation_space = observation_space(self.config)
+        self.single_action_space = spaces.Discrete(N_ACTIONS)
+        self.observation_size = 12 + 10 * self.config.observation.neighbours
+        self.episode_seeds = np.zeros(num_envs, dtype=np.uint64)
+        self._seed_stream = np.random.default_rng(seed)
+
+    # -- episodes --------------------------------------------------------------------------------
+
+    def draw_seeds(self, n: int) -> NDArray[np.uint64]:
+        """The next ``n`` episode seeds of the stream."""
+        return self._seed_stream.integers(0, SEED_BOUND, n, dtype=np.int64).astype(np.uint64)
+
+    def reset(
+        self,
+        *,
+        seed: int | None = None,
+        seeds: NDArray[np.integer] | list[int] | None = None,
+        episodes: NDArray[np.integer] | None = None,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
+        """Start episodes (default all) and return every episode's observations and masks.
+
+        Args:
+            seed: re-seed the stream of episode seeds, then draw from it.
+            seeds: one seed per started episode (integers in 0..2**64-1), instead of the stream.
+            episodes: which slots to restart (default all).
+        """
+        idx = self.sim.all_episodes if episodes is None else np.asarray(episodes, np.int64)
+        if seed is not None:
+            self._seed_stream = np.random.default_rng(seed)
+        if seeds is None:
+            chosen = self.draw_seeds(idx.shape[0])
+        else:
+            chosen = np.asarray([int(s) for s in np.asarray(seeds).reshape(-1)], dtype=np.uint64)
+        self.sim.reset(chosen, episodes=idx)
+        self.episode_seeds[idx] = chosen
+        return observe(self.sim), self.sim.action_masks()
+
+    def end_episodes(self, episodes: NDArray[np.integer]) -> None:
+        """End the given episodes now: every aircraft still flying gets the ``timeout`` outcome
+        (a training-only horizon; the step returned nothing for it)."""
+        idx = np.asarray(episodes, dtype=np.int64)
+        flying = self.sim.ac_active[idx]
+        self.sim.ac_outcome[idx] = np.where(flying, TIMEOUT, self.sim.ac_outcome[idx])
+        self.sim.active[idx, self.sim.B :] = False
+        self.sim.vel_km_s[idx, self.sim.B :] = 0.0
+
+    # -- stepping --------------------------------------------------------------------------------
+
+    def step(self, actions: NDArray[np.integer]) -> VectorStep:
+        """Advance every episode by one step with (E, M) actions (validated by the caller:
+        integers in 0..26)."""
+        sim = self.sim
+        res = sim.step(actions)
+        obs = observe(sim)
+        done = res.acting.any(axis=1) & ~sim.ac_active.any(axis=1)
+        final_obs, final_seeds = obs, self.episode_seeds
+        if self.autoreset and done.any():
+            final_obs, final_seeds = obs.copy(), self.episode_seeds.copy()
+            ended = np.flatnonzero(done)
+            chosen = self.draw_seeds(ended.shape[0])
+            sim.reset(chosen, episodes=ended)
+            self.episode_seeds[ended] = chosen
+            observe(sim, episodes=ended, out=obs)
+        return VectorStep(
+            obs=obs,
+            action_mask=sim.action_masks(),
+            reward=res.reward,
+            terminated=res.terminated,
+            truncated=res.truncated,
+            result=res,
+            episode_done=done,
+            final_obs=final_obs,
+            final_episode_seeds=final_seeds,
+        )
+
+    # -- state -----------------------------------------------------------------------------------
+
+    @property
+    def flying(self) -> NDArray[np.bool_]:
+        """(E, M) aircraft in the sky now."""
+        return self.sim.ac_active.copy()
+
+    def observe(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
+        """(E, M, F) observations and (E, M, 27) masks of the current state."""
+        return observe(self.sim), self.sim.action_masks()
