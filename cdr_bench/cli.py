@@ -21,6 +21,7 @@ from cdr_bench.errors import UserError
 _SUBCOMMAND_MODULES = (
     "cdr_bench.cli",
     "cdr_bench.evaluate.cli",
+    "cdr_bench.evaluate.analysis",
     "cdr_bench.rl.cli",
     "cdr_bench.leaderboard.cli",
     "cdr_bench.scale.cli",

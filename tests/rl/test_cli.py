@@ -125,7 +125,7 @@ def test_bad_ablation_is_a_user_error(tmp_path):
 
 
 def test_mode_summary():
-    from cdr_bench.rl.cli import mode_summary
+    from cdr_bench.evaluate.analysis import mode_summary
 
     s = mode_summary([0] * 26 + [10])
     assert s == {"modes": 1, "normalised_entropy": 0.0}

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cdr_bench.cli import main
-from cdr_bench.rl import cli as rl_cli
+from cdr_bench.evaluate import analysis
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,7 +24,7 @@ def test_classical_agent_writes_json_and_png(tmp_path, capsys):
     assert sum(res["all"]) == 20 and sum(res["success"]) <= 20
     assert all(0 <= s <= a for s, a in zip(res["success"], res["all"], strict=True))
     assert 0.0 <= res["normalised_entropy"] <= 1.0
-    assert res["modes"] == rl_cli.mode_summary(res["success"], 0.05)["modes"]
+    assert res["modes"] == analysis.mode_summary(res["success"], 0.05)["modes"]
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in out.parent.iterdir()) == ["mm.json", "mm.png"]  # no temp files
 
@@ -70,7 +70,7 @@ def test_failing_run_leaves_no_partial_files(tmp_path, monkeypatch):
 def test_mode_summary_counts_modes_at_threshold():
     counts = [0] * 27
     counts[3], counts[5], counts[7] = 90, 6, 4  # 90 %, 6 %, 4 %
-    s = rl_cli.mode_summary(counts, 0.05)
+    s = analysis.mode_summary(counts, 0.05)
     assert s["modes"] == 2
     p = np.array([0.9, 0.06, 0.04])
     assert s["normalised_entropy"] == pytest.approx(-(p * np.log(p)).sum() / np.log(27))
