@@ -32,7 +32,11 @@ else:
     import gymnasium as _gym
 
     if "cdr_bench/Ownship-v0" not in _gym.registry:
-        _gym.register(id="cdr_bench/Ownship-v0", entry_point="cdr_bench.gym_env:OwnshipEnv")
+        _gym.register(
+            id="cdr_bench/Ownship-v0",
+            entry_point="cdr_bench.gym_env:OwnshipEnv",
+            vector_entry_point="cdr_bench.gym_env:OwnshipVectorEnv",
+        )
 
 __all__ = [
     "CDREnv",

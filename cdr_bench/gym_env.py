@@ -1,4 +1,5 @@
-"""Gymnasium single-agent view of the ownship, registered as ``cdr_bench/Ownship-v0``.
+"""Gymnasium single-agent view of the ownship, registered as ``cdr_bench/Ownship-v0``, and its
+native vector form (:class:`OwnshipVectorEnv`, the id's ``vector_entry_point``).
 
 ``gymnasium.make("cdr_bench/Ownship-v0", scenario="high")``: flat ``Box`` observation (the
 ``observation`` part of the PettingZoo dict), ``Discrete(27)`` actions and ``action_masks()``
@@ -15,9 +16,11 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.actions import HOLD
+from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.env import CDREnv
 from cdr_bench.scenarios import ScenarioConfig
+from cdr_bench.sim import OUTCOME_NAMES
+from cdr_bench.vector_env import VectorEnv
 
 
 class OwnshipEnv(gym.Env):
@@ -44,6 +47,7 @@ class OwnshipEnv(gym.Env):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
         self._obs, infos = self.par_env.reset(seed=seed, options=options)
+        self._last_mask = self._obs["ownship_0"]["action_mask"]
         return self._obs["ownship_0"]["observation"], infos["ownship_0"]
 
     def step(self, action: Any) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
@@ -66,10 +70,116 @@ class OwnshipEnv(gym.Env):
 
     def action_masks(self) -> NDArray[np.bool_]:
         """Feasible actions of the ownship now, (27,) bool."""
-        return self.par_env.sim.action_masks()[0, 0].astype(bool)
+        return self._last_mask.astype(bool)
 
     def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]  # gymnasium<1.2 stubs
         return self.par_env.render()
 
     def close(self) -> None:
         self.par_env.close()
+
+
+_VectorStep = tuple[
+    NDArray[np.float32], NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]
+]
+
+
+class OwnshipVectorEnv(gym.vector.VectorEnv):
+    """``num_envs`` ownship episodes as one native Gymnasium vector env (no subprocesses, no
+    copies of the env): what ``gymnasium.make_vec("cdr_bench/Ownship-v0", num_envs=N,
+    vectorization_mode="vector_entry_point")`` returns.
+
+    Arrays: observations (N, F) float32, actions (N,) integers 0..26, rewards (N,), terminations
+    and truncations (N,). Auto-reset in the same step (``metadata["autoreset_mode"]`` is
+    ``SAME_STEP``): when the ownship's flight ends, its episode restarts at once and the
+    observation it ended with is in ``infos["final_obs"]`` (and its info in
+    ``infos["final_info"]``; ``infos["_final_obs"]`` flags the slots), as Gymnasium's own vector
+    envs do. Feasible actions: ``infos["action_mask"]`` (N, 27) and :meth:`action_masks`.
+    Learning intruders of the scenario, if any, hold; the episode ends with the ownship's
+    flight.
+    """
+
+    metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | ScenarioConfig = "medium",
+        render_mode: str | None = None,
+        **overrides: Any,
+    ):
+        if render_mode is not None:
+            raise ValueError("the vector env does not render; use gymnasium.make for one env")
+        self.vector = VectorEnv(scenario, num_envs=num_envs, **overrides)
+        self.num_envs = num_envs
+        self.single_observation_space = self.vector.single_observation_space["observation"]
+        self.single_action_space = self.vector.single_action_space
+        self.observation_space = gym.vector.utils.batch_space(
+            self.single_observation_space, num_envs
+        )
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self.render_mode = None
+        self._actions = np.full((num_envs, self.vector.n_agents), HOLD, dtype=np.int64)
+        self._masks = np.zeros((num_envs, N_ACTIONS), dtype=np.int8)
+
+    def reset(
+        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        """``seed``: one integer seeds the stream of episode seeds; a list gives each slot's
+        episode seed."""
+        if isinstance(seed, (list, tuple, np.ndarray)):
+            obs, masks = self.vector.reset(seeds=seed)
+        else:
+            obs, masks = self.vector.reset(seed=seed)
+        self._masks = masks[:, 0]
+        return obs[:, 0], {"action_mask": self._masks, "episode_seed": self.vector.episode_seeds}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[
+        NDArray[np.float32], NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict
+    ]:
+        a = np.asarray(actions)
+        if a.shape != (self.num_envs,) or not np.issubdtype(a.dtype, np.integer):
+            raise ValueError(
+                f"expected {self.num_envs} integer actions in 0..{N_ACTIONS - 1}, got {a!r}"
+            )
+        if a.size and (a.min() < 0 or a.max() >= N_ACTIONS):
+            raise ValueError(f"actions must be in 0..{N_ACTIONS - 1}, got {a.tolist()}")
+        self._actions[:, 0] = a
+        out = self.vector.step(self._actions)
+        res = out.result
+        reward = out.reward[:, 0]
+        term, trunc = out.terminated[:, 0].copy(), out.truncated[:, 0].copy()
+        obs = out.obs[:, 0]
+        masks = out.action_mask[:, 0]
+        infos: dict[str, Any] = {}
+        ended = np.flatnonzero(term | trunc)
+        if ended.size:
+            final_obs = np.empty(self.num_envs, dtype=object)
+            final_info = np.empty(self.num_envs, dtype=object)
+            for e in ended.tolist():
+                final_obs[e] = obs[e].copy()
+                final_info[e] = {
+                    "outcome": OUTCOME_NAMES[int(res.outcome[e, 0])],
+                    "episode_seed": int(out.final_episode_seeds[e]),
+                }
+            flag = np.zeros(self.num_envs, dtype=bool)
+            flag[ended] = True
+            infos.update(
+                final_obs=final_obs, _final_obs=flag, final_info=final_info, _final_info=flag.copy()
+            )
+            still = ended[self.vector.flying[ended].any(axis=1)]
+            if still.size:  # learning intruders still flying: the ownship's episode is over
+                self.vector.end_episodes(still)
+            new_obs, new_masks = self.vector.reset(episodes=ended)
+            obs[ended] = new_obs[ended, 0]
+            masks[ended] = new_masks[ended, 0]
+        self._masks = masks
+        infos["action_mask"] = masks
+        infos["reward_terms"] = res.terms[:, 0]
+        return obs, reward, term, trunc, infos
+
+    def action_masks(self) -> NDArray[np.bool_]:
+        """(N, 27) feasible actions of every ownship now."""
+        return self._masks.astype(bool)

@@ -1,4 +1,4 @@
-"""Lock-step episode runner on the batched :class:`~cdr_bench.sim.core.Simulator`.
+"""Lock-step episode runner on the batched :class:`~cdr_bench.vector_env.VectorEnv`.
 
 Episodes of a scenario are cut into batches on a fixed grid (batch ``k`` holds episodes
 ``k * batch_size .. (k + 1) * batch_size - 1``); a batch is stepped in lock-step until every
@@ -34,30 +34,18 @@ from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.evaluate.loader import AgentError, LoadedAgent, agent_error_line, load_agent
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig
-from cdr_bench.sim import OUTCOME_NAMES, Simulator, observation_bounds, observe
-from cdr_bench.sim.core import GOAL_TERMS, SAFETY_TERMS
+from cdr_bench.sim import OUTCOME_NAMES
+from cdr_bench.vector_env import VectorEnv, observation_space
 
 DEFAULT_BATCH_SIZE = 200
 DEFAULT_DECISION_TIMEOUT_S = 10.0
-
-
-def agent_ids(config: ScenarioConfig) -> list[str]:
-    """Agent names of the controlled aircraft, in simulator order (m = 0, 1, ...)."""
-    return ["ownship_0"] + [f"intruder_{i}" for i in range(config.n_learning_intruders)]
 
 
 def spaces_for(config: ScenarioConfig) -> tuple[Any, Any]:
     """The per-agent observation space (Dict) and action space (Discrete(27)) of the env."""
     from gymnasium import spaces
 
-    low, high = observation_bounds(config)
-    obs_space = spaces.Dict(
-        {
-            "observation": spaces.Box(low, high, dtype=np.float32),
-            "action_mask": spaces.Box(0, 1, (N_ACTIONS,), dtype=np.int8),
-        }
-    )
-    return obs_space, spaces.Discrete(N_ACTIONS)
+    return observation_space(config), spaces.Discrete(N_ACTIONS)
 
 
 def batch_seed(base_seed: int, scenario_id: str, config_hash: str, batch_index: int) -> int:
@@ -172,11 +160,11 @@ def run_batch(
     stop = min(start + batch_size, n_episodes)
     seeds = episode_seeds(base_seed, config.id, chash, start, stop)
     E = stop - start
-    sim = Simulator(config, n_episodes=E)
-    sim.reset(seeds)
+    env = VectorEnv(config, num_envs=E)
+    obs_all, masks_all = env.reset(seeds=seeds)
     agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
-    ids = agent_ids(config)
-    M = sim.M
+    ids = env.agent_ids
+    M = env.n_agents
 
     steps = np.zeros((E, M), dtype=np.int64)
     los = np.zeros((E, M), dtype=bool)
@@ -189,18 +177,20 @@ def run_batch(
     per_decision_ms: list[float] = []
     per_call_ms: list[float] = []
     full = np.full((E, M), HOLD, dtype=np.int64)
+    flying = env.flying
+    episode_steps = env.sim.steps
 
     def where(row: int) -> str:
         e, m = int(rows_e[row]), int(rows_m[row])
         return (
             f"scenario {config.id!r}, episode {start + e} (seed {seeds[e]}), "
-            f"step {int(sim.steps[e])}, {ids[m]}"
+            f"step {int(episode_steps[e])}, {ids[m]}"
         )
 
-    while sim.ac_active.any():
-        rows_e, rows_m = np.nonzero(sim.ac_active)
-        obs = observe(sim)[rows_e, rows_m]
-        masks = sim.action_masks()[rows_e, rows_m]
+    while flying.any():
+        rows_e, rows_m = np.nonzero(flying)
+        obs = obs_all[rows_e, rows_m]
+        masks = masks_all[rows_e, rows_m]
         n = rows_e.size
         t0 = time.perf_counter()
         try:
@@ -233,17 +223,19 @@ def run_batch(
 
         full[:] = HOLD
         full[rows_e, rows_m] = actions
-        res = sim.step(full)
-        acting = res.acting
-        steps += acting
+        step = env.step(full)
+        res = step.result
+        obs_all, masks_all = step.obs, step.action_mask
+        steps += res.acting
         los |= res.los_with.any(axis=2)
         nmac |= res.nmac_with.any(axis=2)
-        goal_r += sum(res.rewards[k] for k in GOAL_TERMS)
-        safety_r += sum(res.rewards[k] for k in SAFETY_TERMS)
+        goal_r += res.goal_reward
+        safety_r += res.safety_reward
         invalid += res.invalid_action
         np.minimum(min_sep, res.min_sep_km, out=min_sep)
         done = res.outcome != 0
         outcome[done] = res.outcome[done]
+        flying = env.flying
 
     episodes = []
     for e in range(E):
@@ -267,7 +259,7 @@ def run_batch(
             {
                 "episode": start + e,
                 "seed": seeds[e],
-                "steps": int(sim.steps[e]),
+                "steps": int(episode_steps[e]),
                 "aircraft": aircraft,
             }
         )

@@ -1,0 +1,128 @@
+"""The batched environment and its Gymnasium vector face: auto-reset, final observations, the
+same episodes as the PettingZoo env, and a CleanRL-style masked PPO update on it."""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+
+import cdr_bench
+from cdr_bench.actions import HOLD
+from cdr_bench.gym_env import OwnshipVectorEnv
+from cdr_bench.vector_env import VectorEnv
+
+
+def _feasible(rng: np.random.Generator, masks: np.ndarray) -> np.ndarray:
+    """One random feasible action per row of (..., 27) masks."""
+    flat = masks.reshape(-1, masks.shape[-1]).astype(bool)
+    return np.array([rng.choice(np.flatnonzero(m)) for m in flat]).reshape(masks.shape[:-1])
+
+
+def test_make_vec_vector_entry_point_gives_the_native_vector_env():
+    envs = gymnasium.make_vec(
+        "cdr_bench/Ownship-v0", num_envs=5, vectorization_mode="vector_entry_point", scenario="low"
+    )
+    assert isinstance(envs, OwnshipVectorEnv)
+    obs, info = envs.reset(seed=3)
+    assert obs.shape == (5, 42) and obs.dtype == np.float32
+    assert info["action_mask"].shape == (5, 27) and envs.action_masks().dtype == bool
+    assert envs.single_action_space == gymnasium.spaces.Discrete(27)
+    assert envs.observation_space.shape == (5, 42)
+    envs.close()
+
+
+def test_same_step_autoreset_returns_the_new_episode_and_the_final_observation():
+    envs = OwnshipVectorEnv(num_envs=4, scenario="tactical/head-on")  # LoS ends it quickly
+    obs, info = envs.reset(seed=0)
+    seeds = info["episode_seed"].copy()
+    ended_any = False
+    for _ in range(200):
+        obs, reward, term, trunc, info = envs.step(np.full(4, HOLD))
+        done = term | trunc
+        if done.any():
+            ended_any = True
+            e = int(np.flatnonzero(done)[0])
+            assert info["_final_obs"][e] and info["final_info"][e]["outcome"] == "los"
+            assert info["final_info"][e]["episode_seed"] == seeds[e]
+            assert info["final_obs"][e][11] > 0.0  # time elapsed at the end
+            assert obs[e][11] == 0.0  # the new episode's first observation
+            assert not np.isnan(reward).any()
+            break
+    assert ended_any
+
+
+def test_an_episode_of_the_vector_env_is_the_pettingzoo_episode_of_its_seed():
+    rng = np.random.default_rng(1)
+    vec = VectorEnv("marl/low-2", num_envs=3)
+    obs, masks = vec.reset(seeds=[7, 8, 9])
+    par = cdr_bench.parallel_env("marl/low-2")
+    pobs, _ = par.reset(options={"episode_seed": 8})
+    for _ in range(150):
+        if not par.agents:
+            break
+        act = _feasible(rng, masks)
+        for m, agent in enumerate(vec.agent_ids):
+            if agent in pobs:
+                assert np.array_equal(pobs[agent]["observation"], obs[1, m])
+                assert np.array_equal(pobs[agent]["action_mask"], masks[1, m])
+        live = {a: int(act[1, m]) for m, a in enumerate(vec.agent_ids) if a in par.agents}
+        out = vec.step(act)
+        pobs, rew, *_ = par.step(live)
+        for m, agent in enumerate(vec.agent_ids):
+            if agent in rew:
+                assert rew[agent] == out.reward[1, m]
+        obs, masks = out.obs, out.action_mask
+
+
+def test_vector_env_autoreset_keeps_the_final_observation_and_draws_new_seeds():
+    vec = VectorEnv("tactical/crossing", num_envs=3, autoreset=True, seed=5)
+    obs, _ = vec.reset()
+    first = vec.episode_seeds.copy()
+    for _ in range(200):
+        out = vec.step(np.full((3, vec.n_agents), HOLD))
+        if out.episode_done.any():
+            e = int(np.flatnonzero(out.episode_done)[0])
+            assert out.final_episode_seeds[e] == first[e] != vec.episode_seeds[e]
+            assert out.final_obs[e, 0, 11] > 0.0 and out.obs[e, 0, 11] == 0.0
+            assert vec.flying[e].all()
+            return
+    pytest.fail("no episode ended")
+
+
+def test_cleanrl_style_masked_ppo_update_runs_on_the_native_vector_env():
+    torch = pytest.importorskip("torch")
+    envs = gymnasium.make_vec(
+        "cdr_bench/Ownship-v0", num_envs=8, vectorization_mode="vector_entry_point", scenario="low"
+    )
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(42, 32), torch.nn.Tanh(), torch.nn.Linear(32, 28))
+    opt = torch.optim.Adam(net.parameters(), lr=3e-4)
+    obs, info = envs.reset(seed=0)
+    mask = info["action_mask"]
+    for _update in range(2):
+        buf = []
+        for _ in range(32):
+            x = torch.as_tensor(obs)
+            out = net(x)
+            logits = out[:, :27].masked_fill(torch.as_tensor(mask) == 0, -1e9)
+            dist = torch.distributions.Categorical(logits=logits)
+            a = dist.sample()
+            obs, r, term, trunc, info = envs.step(a.numpy())
+            mask = info["action_mask"]
+            buf.append((x, a, dist.log_prob(a).detach(), torch.as_tensor(r), out[:, 27]))
+        ret = torch.stack([b[3] for b in buf]).float()
+        logp_old = torch.stack([b[2] for b in buf])
+        value = torch.stack([b[4] for b in buf])
+        adv = (ret - value).detach()
+        x = torch.stack([b[0] for b in buf]).reshape(-1, 42)
+        logits = net(x)[:, :27]
+        logp = torch.distributions.Categorical(logits=logits).log_prob(
+            torch.stack([b[1] for b in buf]).reshape(-1)
+        )
+        ratio = (logp - logp_old.reshape(-1)).exp()
+        loss = -(ratio * adv.reshape(-1)).mean() + ((ret - value) ** 2).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        assert torch.isfinite(loss)
