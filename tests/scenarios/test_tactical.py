@@ -11,7 +11,7 @@ import pytest
 
 from cdr_bench.actions import decode
 from cdr_bench.scenarios import load_scenario
-from cdr_bench.sim.search import rollout, successful_first_actions
+from cdr_bench.evaluate.search import rollout, successful_first_actions
 
 TACTICAL = ("tactical/head-on", "tactical/crossing", "tactical/overtaking")
 

@@ -101,13 +101,11 @@ sys.meta_path.insert(0, Block())
 
 
 def test_sim_runs_without_rl_libraries():
-    """The simulator (and its search) import and run with PettingZoo, Gymnasium, torch absent."""
+    """The simulator imports and runs with PettingZoo, Gymnasium and torch absent."""
     code = _BLOCKER + (
         "import numpy as np\n"
         "from cdr_bench.scenarios import load_scenario\n"
         "from cdr_bench.sim import Simulator, observe\n"
-        "import importlib.util\n"
-        "if importlib.util.find_spec('cdr_bench.sim.search'): import cdr_bench.sim.search\n"
         "sim = Simulator(load_scenario('high'), 2); sim.reset([0, 1])\n"
         "for _ in range(5): sim.step(np.full((2, 1), 13)); observe(sim)\n"
         "bad = [m for m in ('pettingzoo', 'gymnasium', 'torch') if m in sys.modules]\n"

@@ -4,7 +4,7 @@ Used to certify the tactical scenarios (docs/model.md §8: holding fails, severa
 succeed) and to label first actions in the multimodality analysis (docs/model.md §10).
 
 The search is a fixed family of *follow-on* policies played after a given first action, all
-rolled out in parallel in one batched :class:`~cdr_bench.sim.core.Simulator` (one episode per
+rolled out in parallel in one :class:`~cdr_bench.vector_env.VectorEnv` (one episode per
 candidate sequence, every episode reset with the same seed). A follow-on policy is
 
 1. **turn**: ``turn_steps`` steps of a constant heading change ``turn`` (-1 left, +1 right),
@@ -19,7 +19,6 @@ ownship reach its goal (outcome ``SUCCESS``); the realised action sequence is th
 Failing to find one is evidence, not proof, that no continuation exists.
 
 Only the ownship (controlled aircraft 0) is searched; learning intruders, if any, hold.
-Pure numpy: imports no PettingZoo, Gymnasium or torch.
 """
 
 from __future__ import annotations
@@ -29,10 +28,11 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.actions import HOLD, N_ACTIONS, action_mask
+from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.core import OUTCOME_NAMES, RUNNING, SUCCESS, Simulator
+from cdr_bench.sim.core import OUTCOME_NAMES, SUCCESS, Simulator
 from cdr_bench.sim.geometry import exact_unit_vector
+from cdr_bench.vector_env import VectorEnv
 
 TURN_STEPS = (1, 2, 3, 4, 6, 8)
 """Lengths of the turn phase, steps (a turn of k steps changes the heading by 5 k deg)."""
@@ -120,8 +120,9 @@ def search_batch(
         horizon), (E,) outcome code of the ownship, (E,) steps until it finished.
     """
     E = len(first_actions)
-    sim = Simulator(config, n_episodes=E)
-    sim.reset(np.full(E, seed))
+    env = VectorEnv(config, num_envs=E)
+    env.reset(seeds=np.full(E, seed))
+    sim = env.sim
     played = np.full((E, sim.max_steps), HOLD, dtype=np.int64)
     act = np.full((E, sim.M), HOLD, dtype=np.int64)
     for t in range(sim.max_steps):
@@ -131,7 +132,7 @@ def search_batch(
         a = np.asarray(first_actions) if t == 0 else _follow_on_actions(sim, family, t - 1)
         act[:, 0] = a
         played[:, t] = a
-        sim.step(act)
+        env.step(act)
     return played, sim.ac_outcome[:, 0].copy(), sim.steps.copy()
 
 
@@ -165,9 +166,8 @@ def successful_first_actions(
     fam = follow_on_family() if family is None else family
     n_family = len(fam["turn"])
     candidates = list(range(N_ACTIONS)) if first_actions is None else list(first_actions)
-    probe = Simulator(config)
-    probe.reset([seed])
-    mask = action_mask(probe.ac_level[0, 0])
+    _, masks = VectorEnv(config).reset(seeds=[seed])
+    mask = masks[0, 0]
     result: dict[int, list[int] | None] = {a: None for a in sorted(set(candidates)) if mask[a]}
     for lo, hi in ((0, min(first_pass, n_family)), (min(first_pass, n_family), n_family)):
         rows = {k: v[lo:hi] for k, v in fam.items()}
@@ -193,12 +193,12 @@ def rollout(config: ScenarioConfig, actions: list[int], seed: int = 0, pad: int 
     Returns:
         The outcome name (``"success"``, ``"los"``, ``"nmac"``, ``"boundary"``, ``"timeout"``).
     """
-    sim = Simulator(config)
-    sim.reset([seed])
-    act = np.full((1, sim.M), HOLD, dtype=np.int64)
+    env = VectorEnv(config)
+    env.reset(seeds=[seed])
+    act = np.full((1, env.n_agents), HOLD, dtype=np.int64)
     t = 0
-    while sim.ac_outcome[0, 0] == RUNNING:
+    while env.flying[0, 0]:
         act[0, 0] = actions[t] if t < len(actions) else pad
-        sim.step(act)
+        env.step(act)
         t += 1
-    return OUTCOME_NAMES[int(sim.ac_outcome[0, 0])]
+    return OUTCOME_NAMES[int(env.sim.ac_outcome[0, 0])]
