@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
-from cdr_bench.sim import Simulator, StepResult, observation_bounds, observe
+from cdr_bench.sim import Simulator, StepResult, observation_bounds
 from cdr_bench.sim.core import TIMEOUT
 
 SEED_BOUND = 2**63
@@ -143,7 +143,7 @@ class VectorEnv:
             chosen = np.asarray([int(s) for s in np.asarray(seeds).reshape(-1)], dtype=np.uint64)
         self.sim.reset(chosen, episodes=idx)
         self.episode_seeds[idx] = chosen
-        return observe(self.sim), self.sim.action_masks()
+        return self.sim.observe()
 
     def end_episodes(self, episodes: NDArray[np.integer]) -> None:
         """End the given episodes now: every aircraft still flying gets the ``timeout`` outcome
@@ -161,24 +161,23 @@ class VectorEnv:
         integers in 0..26)."""
         sim = self.sim
         res = sim.step(actions)
-        obs = observe(sim)
-        done = res.acting.any(axis=1) & ~sim.ac_active.any(axis=1)
+        obs, masks = res.obs, res.action_mask
         final_obs, final_seeds = obs, self.episode_seeds
-        if self.autoreset and done.any():
+        if self.autoreset and res.n_done:
             final_obs, final_seeds = obs.copy(), self.episode_seeds.copy()
-            ended = np.flatnonzero(done)
+            ended = np.flatnonzero(res.episode_done)
             chosen = self.draw_seeds(ended.shape[0])
             sim.reset(chosen, episodes=ended)
             self.episode_seeds[ended] = chosen
-            observe(sim, episodes=ended, out=obs)
+            sim.observe(ended, obs=obs, masks=masks)
         return VectorStep(
             obs=obs,
-            action_mask=sim.action_masks(),
+            action_mask=masks,
             reward=res.reward,
             terminated=res.terminated,
             truncated=res.truncated,
             result=res,
-            episode_done=done,
+            episode_done=res.episode_done,
             final_obs=final_obs,
             final_episode_seeds=final_seeds,
         )
@@ -192,4 +191,4 @@ class VectorEnv:
 
     def observe(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
         """(E, M, F) observations and (E, M, 27) masks of the current state."""
-        return observe(self.sim), self.sim.action_masks()
+        return self.sim.observe()

@@ -228,12 +228,10 @@ def cmd_multimodal(ns: argparse.Namespace) -> int:
 
 
 def cmd_latency(ns: argparse.Namespace) -> int:
-    try:
-        import torch
-
-        torch.set_num_threads(ns.threads)
-    except ImportError:  # pragma: no cover
-        pass
+    # Before the agent is loaded (and imports its numerical libraries): their thread pools read
+    # these when they start. The evaluator itself imports no torch.
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(ns.threads)
     err = UserError
     try:
         sizes = [int(x) for x in ns.batch_sizes.split(",")]

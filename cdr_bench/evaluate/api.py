@@ -6,7 +6,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +38,20 @@ SUITES: dict[str, tuple[str, ...]] = {
 """Named suites: scenario names, each run at ``PAPER_EPISODES`` episodes unless overridden."""
 
 BACKENDS = ("local", "ray")
-"""Where ``evaluate`` runs its episode batches: local processes or Ray tasks."""
+"""Where ``evaluate`` runs its episode batches: local processes or Ray tasks. Backends other
+than ``local`` are registered by the layers above the evaluator (:func:`register_backend`;
+``cdr_bench.scale.ray_eval`` registers ``ray``), so the evaluator never imports Ray."""
+
+TaskRunner = Callable[[list[tuple[Any, ...]], int, "str | None"], Iterator[dict[str, Any]]]
+_REGISTERED: dict[str, TaskRunner] = {}
+
+
+def register_backend(name: str, run_tasks: TaskRunner) -> None:
+    """Make ``backend=name`` run episode batches with ``run_tasks(tasks, workers, address)``,
+    which yields each batch's result dict (:func:`cdr_bench.evaluate.runner.run_batch_task`
+    of a task's arguments) as it finishes."""
+    _REGISTERED[name] = run_tasks
+
 
 SEED_DERIVATION = (
     "seed_i = int(sha256(f'{base_seed}/{scenario_id}/{config_hash}/{i}')[:8], big-endian) >> 1"
@@ -249,10 +262,14 @@ def evaluate(
 def _run_tasks(
     tasks: list[tuple[Any, ...]], workers: int, backend: str = "local", address: str | None = None
 ):
-    if backend == "ray":
-        from cdr_bench.scale.ray_eval import run_tasks_on_ray
-
-        yield from run_tasks_on_ray(tasks, workers, address)
+    if backend != "local":
+        run = _REGISTERED.get(backend)
+        if run is None:
+            raise UserError(
+                f"--backend {backend}: not available in this process (the command line "
+                "registers 'ray'; from Python, import cdr_bench.scale.ray_eval first)"
+            )
+        yield from run(tasks, workers, address)
         return
     if workers == 1 or len(tasks) <= 1:
         for t in tasks:

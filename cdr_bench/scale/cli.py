@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+import cdr_bench.scale.ray_eval  # noqa: F401  (registers the evaluator's "ray" backend)
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser(

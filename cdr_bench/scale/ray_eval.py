@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.api import register_backend
 
 
 def run_tasks_on_ray(
@@ -52,3 +53,6 @@ def run_tasks_on_ray(
             ray.cancel(ref)
         if started:
             ray.shutdown()
+
+
+register_backend("ray", run_tasks_on_ray)

@@ -28,10 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.actions import action_mask
+from cdr_bench.actions import N_ACTIONS, action_mask
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim import kernels as k
 from cdr_bench.sim.geometry import exact_unit_vector, heading_deg
+from cdr_bench.sim.observation import observation_bounds
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
 N_LEVELS = k.N_LEVELS
@@ -77,6 +78,16 @@ class StepResult:
     """(E, M) smallest swept horizontal distance to any same-level aircraft (inf if none)"""
     events: NDArray[np.bool_]
     """(2, E, M, N): LoS with / NMAC with aircraft n (background first, then controlled)"""
+    reward: NDArray[np.float64]
+    """(E, M) total reward R_G + R_S of the step (the terms summed in order; 0 if not flying)"""
+    episode_done: NDArray[np.bool_]
+    """(E,) the episode's last aircraft finished this step"""
+    n_done: int
+    """episodes done this step"""
+    obs: NDArray[np.float32]
+    """(E, M, F) observations after the step"""
+    action_mask: NDArray[np.int8]
+    """(E, M, 27) feasible actions after the step"""
 
     acting = property(lambda self: self.flags[..., k.F_ACTING], doc="(E, M) flew this step")
     invalid_action = property(
@@ -96,12 +107,6 @@ class StepResult:
     def rewards(self) -> dict[str, NDArray[np.float64]]:
         """The named reward terms as (E, M) views."""
         return {name: self.terms[..., i] for i, name in enumerate(REWARD_TERMS)}
-
-    @property
-    def reward(self) -> NDArray[np.float64]:
-        """(E, M) total reward R_G + R_S (terms summed in :data:`REWARD_TERMS` order)."""
-        t = self.terms
-        return t[..., 0] + t[..., 1] + t[..., 2] + t[..., 3] + t[..., 4] + t[..., 5] + t[..., 6]
 
     @property
     def goal_reward(self) -> NDArray[np.float64]:
@@ -238,6 +243,9 @@ class Simulator:
             own[k.O_LEVEL] = o.start.level
             own[k.O_GOAL_X], own[k.O_GOAL_Y] = o.goal_km
         self._own_fixed = own
+        low, high = observation_bounds(cfg)
+        self.obs_bounds = (low.astype(np.float64), high.astype(np.float64))
+        """(low, high) of the observation Box, float64 (F,) each"""
         self.all_episodes = np.arange(E)
         self.all_episodes.flags.writeable = False
 
@@ -313,7 +321,8 @@ class Simulator:
             )
 
     def step(self, actions: NDArray[np.integer]) -> StepResult:
-        """Advance every episode by one step.
+        """Advance every episode by one step; the result carries the observations and masks
+        after it.
 
         Args:
             actions: (E, M) action indices in 0..26; entries of aircraft that are not flying
@@ -321,12 +330,17 @@ class Simulator:
         """
         E, M = self.E, self.M
         act = np.asarray(actions, dtype=np.int64).reshape(E, M)
+        low, high = self.obs_bounds
         terms = np.zeros((E, M, k.N_TERMS))
         flags = np.zeros((E, M, k.N_FLAGS), dtype=bool)
         outcome = np.zeros((E, M), dtype=np.int8)
         min_sep = np.empty((E, M))
         events = np.zeros((2, E, M, self.N), dtype=bool)
-        k.step_episodes(
+        reward = np.zeros((E, M))
+        done = np.zeros(E, dtype=bool)
+        obs = np.empty((E, M, low.shape[0]), dtype=np.float32)
+        masks = np.empty((E, M, N_ACTIONS), dtype=np.int8)
+        n_done = k.step_episodes(
             act,
             self.pos_km,
             self.vel_km_s,
@@ -348,13 +362,57 @@ class Simulator:
             self.C,
             self.X,
             self.params,
+            low,
+            high,
             terms,
             flags,
             outcome,
             min_sep,
             events,
+            reward,
+            done,
+            obs,
+            masks,
         )
-        return StepResult(terms, flags, outcome, min_sep, events)
+        return StepResult(terms, flags, outcome, min_sep, events, reward, done, n_done, obs, masks)
+
+    def observe(
+        self,
+        episodes: NDArray[np.integer] | None = None,
+        obs: NDArray[np.float32] | None = None,
+        masks: NDArray[np.int8] | None = None,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
+        """Observations (E, M, F) float32 and action masks (E, M, 27) int8 of the current state.
+
+        Args:
+            episodes: only these episodes (default all); rows of the others in ``obs`` and
+                ``masks`` are left as they are.
+            obs, masks: arrays to write into (default new ones, zero).
+
+        Aircraft that are not flying get the observation of their last state.
+        """
+        low, high = self.obs_bounds
+        if obs is None:
+            obs = np.zeros((self.E, self.M, low.shape[0]), dtype=np.float32)
+        if masks is None:
+            masks = np.zeros((self.E, self.M, N_ACTIONS), dtype=np.int8)
+        k.observe_episodes(
+            self.all_episodes if episodes is None else np.asarray(episodes, dtype=np.int64),
+            obs,
+            masks,
+            self.pos_km,
+            self.vel_km_s,
+            self.level,
+            self.active,
+            self.ac_dir,
+            self.ac_speed_kt,
+            self.ac_goal_km,
+            self.steps,
+            self.params,
+            low,
+            high,
+        )
+        return obs, masks
 
     # ------------------------------------------------------------------------------------------
     # Derived quantities

@@ -105,7 +105,7 @@ VEL_SCALE_KM_S = 1000.0 * KM_PER_S_PER_KT
 # Geometry
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def closest_approach(
     px: float, py: float, vx: float, vy: float, horizon_s: float
 ) -> tuple[float, float]:
@@ -144,7 +144,7 @@ _U30, _U27, _U31, _U11, _U53 = (np.uint64(k) for k in (30, 27, 31, 11, 53))
 _TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _next_u64(state: np.ndarray) -> np.uint64:
     z = state[0] + _GOLDEN
     state[0] = z
@@ -153,14 +153,14 @@ def _next_u64(state: np.ndarray) -> np.uint64:
     return z ^ (z >> _U31)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _uniform(state: np.ndarray, lo: float, hi: float) -> float:
     """Uniform in [lo, hi): 53 random bits."""
     u = float(_next_u64(state) >> _U11) * _TWO_M53
     return lo + (hi - lo) * u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _below(state: np.ndarray, n: int) -> int:
     """Uniform integer in 0..n-1 (n < 2**11): the top bits of a 53-bit draw times n."""
     return int(((_next_u64(state) >> _U11) * np.uint64(n)) >> _U53)
@@ -231,7 +231,7 @@ def _populate_traffic(
         active[e, b] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clear_of_traffic(e, x, y, clearance, lv, pos, level, active, B):
     """No background aircraft (at level ``lv``, or any level when ``lv < 0``) closer than
     ``clearance`` km to (x, y)."""
@@ -512,7 +512,7 @@ def _spawn_traffic(
         route_count[e, r] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _judge(e, m, n, i, pos, vel, dt, los_km, nmac_km, events, n_los, n_nmac, min_sep):
     """Swept separation of controlled aircraft m (slot i) and aircraft n over the step."""
     d, _ = closest_approach(
@@ -555,11 +555,17 @@ def step_episodes(
     C,
     n_explicit,
     fp,
+    low,
+    high,
     terms,
     flags,
     outcome,
     min_sep,
     events,
+    reward,
+    done,
+    obs,
+    masks,
 ):
     """Advance every episode by one step (docs/model.md §3-§6).
 
@@ -572,6 +578,13 @@ def step_episodes(
         outcome: (E, M) out, int8: the outcome code of an aircraft that finished this step.
         min_sep: (E, M) out, smallest swept distance to a same-level aircraft (inf if none).
         events: (2, E, M, N) out, bool, zero on entry: LoS with / NMAC with aircraft n.
+        reward: (E, M) out, zero on entry: the sum of the terms.
+        done: (E,) out, zero on entry: the episode's last aircraft finished this step.
+        obs, masks: (E, M, F) float32 and (E, M, 27) int8 out: observations and action masks
+            after the step (:func:`observe_episodes`; low, high: the observation bounds).
+
+    Returns:
+        The number of episodes done this step.
     """
     E, M = ac_dir.shape[0], ac_dir.shape[1]
     N = pos.shape[1]
@@ -587,6 +600,10 @@ def step_episodes(
     n_los = np.empty(M, dtype=np.int64)
     n_nmac = np.empty(M, dtype=np.int64)
     occ = np.empty(M, dtype=np.int64)
+    row = np.zeros(obs.shape[2])
+    best_d = np.empty(max((obs.shape[2] - 12) // 10, 1))
+    best_n = np.empty(best_d.shape[0], dtype=np.int64)
+    n_done = 0
     for e in range(E):
         live = False
         for m in range(M):
@@ -596,6 +613,25 @@ def step_episodes(
             min_sep[e, m] = np.inf
             new_level[m] = level[e, B + m]
         if not live:
+            _observe_episode(
+                e,
+                obs,
+                masks,
+                pos,
+                vel,
+                level,
+                active,
+                ac_dir,
+                ac_speed,
+                ac_goal,
+                steps,
+                fp,
+                low,
+                high,
+                row,
+                best_d,
+                best_n,
+            )
             continue
 
         # 1. Apply the actions at the start of the step: turn, clipped speed, target level.
@@ -762,6 +798,36 @@ def step_episodes(
                 active[e, i] = False
                 vel[e, i, 0] = 0.0
                 vel[e, i, 1] = 0.0
+            total = 0.0
+            for t in range(N_TERMS):
+                total += terms[e, m, t]
+            reward[e, m] = total
+        still = False
+        for m in range(M):
+            still |= active[e, B + m]
+        if not still:
+            done[e] = True
+            n_done += 1
+        _observe_episode(
+            e,
+            obs,
+            masks,
+            pos,
+            vel,
+            level,
+            active,
+            ac_dir,
+            ac_speed,
+            ac_goal,
+            steps,
+            fp,
+            low,
+            high,
+            row,
+            best_d,
+            best_n,
+        )
+    return n_done
 
 
 # ----------------------------------------------------------------------------------------------
@@ -770,14 +836,61 @@ def step_episodes(
 
 @njit(cache=True)
 def observe_episodes(
-    episodes, out, pos, vel, level, active, ac_dir, ac_speed, ac_goal, steps, fp, low, high
+    episodes, out, masks, pos, vel, level, active, ac_dir, ac_speed, ac_goal, steps, fp, low, high
 ):
-    """Observation of every controlled aircraft of episodes ``episodes`` into ``out``
-    (E, M, F) float32; the layout is :mod:`cdr_bench.sim.observation`'s table.
+    """Observations (E, M, F) float32 and action masks (E, M, 27) int8 of every controlled
+    aircraft of episodes ``episodes``, written into ``out`` and ``masks``; the layout is
+    :mod:`cdr_bench.sim.observation`'s table.
 
     Neighbours are the K nearest other aircraft in the sky (horizontal distance, any level;
     ties to the lower index); empty slots are zero. Every value is clipped to [low, high].
     """
+    row = np.zeros(out.shape[2])
+    best_d = np.empty(max((out.shape[2] - 12) // 10, 1))
+    best_n = np.empty(best_d.shape[0], dtype=np.int64)
+    for ie in range(episodes.shape[0]):
+        _observe_episode(
+            episodes[ie],
+            out,
+            masks,
+            pos,
+            vel,
+            level,
+            active,
+            ac_dir,
+            ac_speed,
+            ac_goal,
+            steps,
+            fp,
+            low,
+            high,
+            row,
+            best_d,
+            best_n,
+        )
+
+
+@njit(cache=True)
+def _observe_episode(
+    e,
+    out,
+    masks,
+    pos,
+    vel,
+    level,
+    active,
+    ac_dir,
+    ac_speed,
+    ac_goal,
+    steps,
+    fp,
+    low,
+    high,
+    row,
+    best_d,
+    best_n,
+):
+    """:func:`observe_episodes` of episode ``e`` (``row``, ``best_*``: scratch space)."""
     M = ac_dir.shape[1]
     N = pos.shape[1]
     B = N - M
@@ -791,75 +904,75 @@ def observe_episodes(
     mid = 0.5 * (lo_v + hi_v)
     half = max(0.5 * (hi_v - lo_v), 1e-9)
     inv_steps = 1.0 / fp[P_MAX_STEPS]
-    row = np.zeros(F)
-    best_d = np.empty(max(K, 1))
-    best_n = np.empty(max(K, 1), dtype=np.int64)
-    for ie in range(episodes.shape[0]):
-        e = episodes[ie]
-        for m in range(M):
-            i = B + m
-            x, y = pos[e, i, 0], pos[e, i, 1]
-            ux, uy = ac_dir[e, m, 0], ac_dir[e, m, 1]
-            gx = ac_goal[e, m, 0] - x
-            gy = ac_goal[e, m, 1] - y
-            gd = math.sqrt(gx * gx + gy * gy)
-            inv_gd = 1.0 / max(gd, 1e-9)
-            row[0] = x * (2.0 / size) - 1.0
-            row[1] = y * (2.0 / size) - 1.0
-            row[2] = ux  # sin(heading)
-            row[3] = uy  # cos(heading)
-            row[4] = (ac_speed[e, m] - mid) / half
-            row[5] = level[e, i] - 1.0
-            row[6] = gx / size
-            row[7] = gy / size
-            row[8] = gd / size
-            row[9] = (gx * uy - gy * ux) * inv_gd  # sin(bearing - heading): + goal to the right
-            row[10] = (gx * ux + gy * uy) * inv_gd  # cos(bearing - heading)
-            row[11] = steps[e] * inv_steps
+    for m in range(M):
+        i = B + m
+        x, y = pos[e, i, 0], pos[e, i, 1]
+        ux, uy = ac_dir[e, m, 0], ac_dir[e, m, 1]
+        gx = ac_goal[e, m, 0] - x
+        gy = ac_goal[e, m, 1] - y
+        gd = math.sqrt(gx * gx + gy * gy)
+        inv_gd = 1.0 / max(gd, 1e-9)
+        row[0] = x * (2.0 / size) - 1.0
+        row[1] = y * (2.0 / size) - 1.0
+        row[2] = ux  # sin(heading)
+        row[3] = uy  # cos(heading)
+        row[4] = (ac_speed[e, m] - mid) / half
+        row[5] = level[e, i] - 1.0
+        row[6] = gx / size
+        row[7] = gy / size
+        row[8] = gd / size
+        row[9] = (gx * uy - gy * ux) * inv_gd  # sin(bearing - heading): + goal to the right
+        row[10] = (gx * ux + gy * uy) * inv_gd  # cos(bearing - heading)
+        row[11] = steps[e] * inv_steps
 
-            # K nearest others by insertion (strict <: the lower index wins a tie).
-            found = 0
-            for n in range(N):
-                if n == i or not active[e, n]:
-                    continue
-                dx = pos[e, n, 0] - x
-                dy = pos[e, n, 1] - y
-                d = math.sqrt(dx * dx + dy * dy)
-                if found < K:
-                    j = found
-                    found += 1
-                elif d < best_d[K - 1]:
-                    j = K - 1
-                else:
-                    continue
-                while j > 0 and d < best_d[j - 1]:
-                    best_d[j] = best_d[j - 1]
-                    best_n[j] = best_n[j - 1]
-                    j -= 1
-                best_d[j] = d
-                best_n[j] = n
-            for k in range(K):
-                base = 12 + 10 * k
-                if k >= found:
-                    for f in range(10):
-                        row[base + f] = 0.0
-                    continue
-                n = best_n[k]
-                px = pos[e, n, 0] - x
-                py = pos[e, n, 1] - y
-                vx = vel[e, n, 0] - vel[e, i, 0]
-                vy = vel[e, n, 1] - vel[e, i, 1]
-                dlevel = float(level[e, n] - level[e, i])
-                d_cpa, t_cpa = closest_approach(px, py, vx, vy, look)
-                row[base] = 1.0
-                row[base + 1] = px / rng_km
-                row[base + 2] = py / rng_km
-                row[base + 3] = vx / VEL_SCALE_KM_S
-                row[base + 4] = vy / VEL_SCALE_KM_S
-                row[base + 5] = dlevel / 2.0
-                row[base + 6] = best_d[k] / rng_km
-                row[base + 7] = t_cpa / look
-                row[base + 8] = d_cpa / rng_km
-                row[base + 9] = 1.0 if dlevel == 0.0 and d_cpa < los_km else 0.0
-            for f in range(F):
-                out[e, m, f] = min(max(row[f], low[f]), high[f])
+        # K nearest others by insertion on squared distances (strict <: the lower index
+        # wins a tie); the square root is taken for the K chosen only.
+        found = 0
+        for n in range(N):
+            if n == i or not active[e, n]:
+                continue
+            dx = pos[e, n, 0] - x
+            dy = pos[e, n, 1] - y
+            d = dx * dx + dy * dy
+            if found < K:
+                j = found
+                found += 1
+            elif d < best_d[K - 1]:
+                j = K - 1
+            else:
+                continue
+            while j > 0 and d < best_d[j - 1]:
+                best_d[j] = best_d[j - 1]
+                best_n[j] = best_n[j - 1]
+                j -= 1
+            best_d[j] = d
+            best_n[j] = n
+        for k in range(K):
+            base = 12 + 10 * k
+            if k >= found:
+                for f in range(10):
+                    row[base + f] = 0.0
+                continue
+            n = best_n[k]
+            px = pos[e, n, 0] - x
+            py = pos[e, n, 1] - y
+            vx = vel[e, n, 0] - vel[e, i, 0]
+            vy = vel[e, n, 1] - vel[e, i, 1]
+            dlevel = float(level[e, n] - level[e, i])
+            d_cpa, t_cpa = closest_approach(px, py, vx, vy, look)
+            row[base] = 1.0
+            row[base + 1] = px / rng_km
+            row[base + 2] = py / rng_km
+            row[base + 3] = vx / VEL_SCALE_KM_S
+            row[base + 4] = vy / VEL_SCALE_KM_S
+            row[base + 5] = dlevel / 2.0
+            row[base + 6] = math.sqrt(best_d[k]) / rng_km
+            row[base + 7] = t_cpa / look
+            row[base + 8] = d_cpa / rng_km
+            row[base + 9] = 1.0 if dlevel == 0.0 and d_cpa < los_km else 0.0
+        for f in range(F):
+            out[e, m, f] = min(max(row[f], low[f]), high[f])
+        lv = level[e, i]
+        for a in range(27):
+            a_h = a % 3 - 1
+            masks[e, m, a] = 0 <= lv + a_h < N_LEVELS

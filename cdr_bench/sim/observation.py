@@ -34,12 +34,15 @@ idx   name                   meaning (normalisation)
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.core import Simulator
-from cdr_bench.sim.kernels import observe_episodes
+
+if TYPE_CHECKING:
+    from cdr_bench.sim.core import Simulator
 
 OWN_FEATURES = (
     "x",
@@ -94,44 +97,14 @@ def observe(
     episodes: NDArray[np.integer] | None = None,
     out: NDArray[np.float32] | None = None,
 ) -> NDArray[np.float32]:
-    """Observation of every controlled aircraft, (E, M, F) float32.
+    """Observation of every controlled aircraft, (E, M, F) float32: the first part of
+    :meth:`Simulator.observe <cdr_bench.sim.core.Simulator.observe>` (which also gives the
+    action masks).
 
     Args:
         sim: the simulator.
         episodes: only these episodes (default all); the rows of the others in ``out`` are
             left as they are.
         out: (E, M, F) float32 array to write into (default a new zero array).
-
-    Aircraft that are not flying get the observation of their last state (the environments do
-    not ask for it once they have left).
     """
-    if out is None:
-        out = np.zeros((sim.E, sim.M, 12 + 10 * sim.config.observation.neighbours), np.float32)
-    low, high = _bounds(sim.config)
-    observe_episodes(
-        sim.all_episodes if episodes is None else np.asarray(episodes, dtype=np.int64),
-        out,
-        sim.pos_km,
-        sim.vel_km_s,
-        sim.level,
-        sim.active,
-        sim.ac_dir,
-        sim.ac_speed_kt,
-        sim.ac_goal_km,
-        sim.steps,
-        sim.params,
-        low,
-        high,
-    )
-    return out
-
-
-_BOUNDS_CACHE: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-
-
-def _bounds(cfg: ScenarioConfig) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    key = cfg.observation.neighbours
-    if key not in _BOUNDS_CACHE:
-        low, high = observation_bounds(cfg)
-        _BOUNDS_CACHE[key] = (low.astype(np.float64), high.astype(np.float64))
-    return _BOUNDS_CACHE[key]
+    return sim.observe(episodes, obs=out)[0]
