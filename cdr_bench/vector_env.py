@@ -57,7 +57,33 @@ def observation_space(config: ScenarioConfig) -> spaces.Dict:
     )
 
 
-@dataclass(frozen=True)
+def random_feasible_actions(masks: NDArray[np.int8], rng: np.random.Generator) -> NDArray[np.int64]:
+    """One uniformly random feasible action per row of (..., 27) action masks (a batched
+    ``action_space.sample(mask)``)."""
+    # Masks differ only in the level part: three patterns (no descent, all, no climb), keyed by
+    # whether action 0 (descend) and action 2 (climb) are feasible.
+    key = masks[..., 0] + 2 * masks[..., 2]
+    pick = rng.integers(0, _FEASIBLE_LCM, key.shape) % _FEASIBLE_COUNT[key]
+    return _FEASIBLE_TABLE[key, pick]
+
+
+def _feasible_table() -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    table = np.zeros((4, N_ACTIONS), dtype=np.int64)
+    count = np.ones(4, dtype=np.int64)
+    for key, (descend, climb) in enumerate(((0, 0), (1, 0), (0, 1), (1, 1))):
+        feasible = [
+            a for a in range(N_ACTIONS) if (a % 3 != 0 or descend) and (a % 3 != 2 or climb)
+        ]
+        table[key, : len(feasible)] = feasible
+        count[key] = len(feasible)
+    return table, count
+
+
+_FEASIBLE_TABLE, _FEASIBLE_COUNT = _feasible_table()
+_FEASIBLE_LCM = 27 * 18 * 9 * 2**40  # a multiple of every count: no modulo bias
+
+
+@dataclass(slots=True)
 class VectorStep:
     """What :meth:`VectorEnv.step` returns; every array is fresh."""
 

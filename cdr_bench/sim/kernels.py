@@ -144,7 +144,7 @@ _U30, _U27, _U31, _U11, _U53 = (np.uint64(k) for k in (30, 27, 31, 11, 53))
 _TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _next_u64(state: np.ndarray) -> np.uint64:
     z = state[0] + _GOLDEN
     state[0] = z
@@ -153,14 +153,14 @@ def _next_u64(state: np.ndarray) -> np.uint64:
     return z ^ (z >> _U31)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _uniform(state: np.ndarray, lo: float, hi: float) -> float:
     """Uniform in [lo, hi): 53 random bits."""
     u = float(_next_u64(state) >> _U11) * _TWO_M53
     return lo + (hi - lo) * u
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _below(state: np.ndarray, n: int) -> int:
     """Uniform integer in 0..n-1 (n < 2**11): the top bits of a 53-bit draw times n."""
     return int(((_next_u64(state) >> _U11) * np.uint64(n)) >> _U53)
@@ -231,7 +231,7 @@ def _populate_traffic(
         active[e, b] = True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _clear_of_traffic(e, x, y, clearance, lv, pos, level, active, B):
     """No background aircraft (at level ``lv``, or any level when ``lv < 0``) closer than
     ``clearance`` km to (x, y)."""
@@ -512,26 +512,6 @@ def _spawn_traffic(
         route_count[e, r] += 1
 
 
-@njit(cache=True, inline="always")
-def _judge(e, m, n, i, pos, vel, dt, los_km, nmac_km, events, n_los, n_nmac, min_sep):
-    """Swept separation of controlled aircraft m (slot i) and aircraft n over the step."""
-    d, _ = closest_approach(
-        pos[e, n, 0] - pos[e, i, 0],
-        pos[e, n, 1] - pos[e, i, 1],
-        vel[e, n, 0] - vel[e, i, 0],
-        vel[e, n, 1] - vel[e, i, 1],
-        dt,
-    )
-    if d < min_sep[e, m]:
-        min_sep[e, m] = d
-    if d < los_km:  # an NMAC (d < nmac_km < los_km) is also a LoS
-        events[0, e, m, n] = True
-        n_los[m] += 1
-        if d < nmac_km:
-            events[1, e, m, n] = True
-            n_nmac[m] += 1
-
-
 @njit(cache=True)
 def step_episodes(
     actions,
@@ -661,37 +641,48 @@ def step_episodes(
             vel[e, B + m, 1] = ac_dir[e, m, 1] * v
 
         # 2. Swept separation over [0, dt] against every aircraft in the sky; a level change
-        #    occupies the old and the new level for the step. Background aircraft move (4.)
-        #    as soon as they have been judged: one pass over them.
+        #    occupies the old and the new level for the step.
+        for m in range(M):
+            occ[m] = ((1 << level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
         for m in range(M):
             n_los[m] = 0
             n_nmac[m] = 0
-            min_sep[e, m] = np.inf
-            occ[m] = ((1 << level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
+            if not acting[m]:
+                continue
+            i = B + m
+            occ_m = occ[m]
+            px, py = pos[e, i, 0], pos[e, i, 1]
+            vx, vy = vel[e, i, 0], vel[e, i, 1]
+            best = np.inf  # locals, not array elements: kept in registers
+            n_l = 0
+            n_n = 0
+            for n in range(N):
+                if n == i or not active[e, n]:
+                    continue
+                occ_n = (1 << level[e, n]) if n < B else occ[n - B]
+                if occ_m & occ_n == 0:
+                    continue
+                d, _ = closest_approach(
+                    pos[e, n, 0] - px, pos[e, n, 1] - py, vel[e, n, 0] - vx, vel[e, n, 1] - vy, dt
+                )
+                if d < best:
+                    best = d
+                if d < los_km:  # an NMAC (d < nmac_km < los_km) is also a LoS
+                    events[0, e, m, n] = True
+                    n_l += 1
+                    if d < nmac_km:
+                        events[1, e, m, n] = True
+                        n_n += 1
+            min_sep[e, m] = best
+            n_los[m] = n_l
+            n_nmac[m] = n_n
+
+        # 4. Move the background (every slot: one not in the sky is placed again when it
+        #    spawns); airway aircraft leave at the end of their airway, explicit ones at the
+        #    sector edge.
         n_airway = bg_arc.shape[1]
         step_km = fp[P_TRAFFIC_STEP]
         for n in range(B):
-            if active[e, n]:
-                occ_n = 1 << level[e, n]
-                for m in range(M):
-                    if occ[m] & occ_n:
-                        _judge(
-                            e,
-                            m,
-                            n,
-                            B + m,
-                            pos,
-                            vel,
-                            dt,
-                            los_km,
-                            nmac_km,
-                            events,
-                            n_los,
-                            n_nmac,
-                            min_sep,
-                        )
-            # 4. Move every slot (one not in the sky is placed again when it spawns); airway
-            #    aircraft leave at the end of their airway, explicit ones at the sector edge.
             x = pos[e, n, 0] + vel[e, n, 0] * dt
             y = pos[e, n, 1] + vel[e, n, 1] * dt
             pos[e, n, 0] = x
@@ -703,24 +694,6 @@ def step_episodes(
                     active[e, n] = False
             elif x < 0.0 or x > size or y < 0.0 or y > size:
                 active[e, n] = False
-        for m in range(M):
-            for m2 in range(M):
-                if m2 != m and occ[m] & occ[m2]:
-                    _judge(
-                        e,
-                        m,
-                        B + m2,
-                        B + m,
-                        pos,
-                        vel,
-                        dt,
-                        los_km,
-                        nmac_km,
-                        events,
-                        n_los,
-                        n_nmac,
-                        min_sep,
-                    )
 
         # 3. Swept goal test: the goal is a fixed point.
         for m in range(M):

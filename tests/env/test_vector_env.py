@@ -126,3 +126,17 @@ def test_cleanrl_style_masked_ppo_update_runs_on_the_native_vector_env():
         loss.backward()
         opt.step()
         assert torch.isfinite(loss)
+
+
+def test_random_feasible_actions_are_feasible_and_uniform():
+    from cdr_bench.actions import action_mask
+    from cdr_bench.vector_env import random_feasible_actions
+
+    rng = np.random.default_rng(0)
+    for level in range(3):
+        masks = np.repeat(action_mask(level)[None], 54_000, axis=0)
+        counts = np.bincount(random_feasible_actions(masks, rng), minlength=27)
+        feasible = masks[0] == 1
+        assert (counts[~feasible] == 0).all()
+        expected = 54_000 / feasible.sum()
+        assert np.abs(counts[feasible] - expected).max() < 5 * np.sqrt(expected)
