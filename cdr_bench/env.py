@@ -262,18 +262,19 @@ class CDREnv(ParallelEnv):
         out = self.vector.step(act)
         res = out.result
         self._last_result = res
-        own = self.vector.sim.pos_km[0, self.vector.sim.B].tolist()
-        self._trail.append((own[0], own[1]))
-        obs = self._observations(acting, out.obs, out.action_mask)
-        rewards, terms, truncs, infos = {}, {}, {}, {}
+        if self.render_mode is not None:
+            own = self.vector.sim.ac_pos_km[0, 0].tolist()
+            self._trail.append((own[0], own[1]))
+        obs_rows, mask_rows = out.obs[0], out.action_mask[0]
+        obs, rewards, terms, truncs, infos = {}, {}, {}, {}, {}
         step = int(self.vector.sim.steps[0])
         terms_rows = res.terms[0].tolist()
         flags = res.flags[0].tolist()
         min_sep = res.min_sep_km[0].tolist()
-        outcome = res.outcome[0].tolist()
         finished = False
         for agent in acting:
             m = self._index[agent]
+            obs[agent] = {"observation": obs_rows[m], "action_mask": mask_rows[m]}
             row = terms_rows[m]  # REWARD_TERMS: the first five are R_G, the last two R_S
             g = row[0] + row[1] + row[2] + row[3] + row[4]
             s = row[5] + row[6]
@@ -295,7 +296,7 @@ class CDREnv(ParallelEnv):
                 "step": step,
             }
             if term or trunc:
-                info["outcome"] = OUTCOME_NAMES[outcome[m]]
+                info["outcome"] = OUTCOME_NAMES[int(res.outcome[0, m])]
                 finished = True
             infos[agent] = info
         if finished:

@@ -61,7 +61,7 @@ GOAL_TERMS = REWARD_TERMS[:5]
 SAFETY_TERMS = REWARD_TERMS[5:]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class StepResult:
     """What happened to every controlled aircraft during one step.
 
