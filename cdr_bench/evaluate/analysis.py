@@ -139,7 +139,12 @@ def heatmap(
     of the successful first actions as shares of all samples; with ``all_counts`` a first row
     shows every sampled first action. Written atomically (temporary file in the same folder,
     then ``os.replace``)."""
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        raise UserError(
+            "the heat map of --out needs matplotlib: pip install 'cdr-bench[plot]'"
+        ) from None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
