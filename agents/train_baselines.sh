@@ -9,8 +9,10 @@
 # condition as the W/O-DPSC ablation of Diffusion-AC), width 128, gamma 0.99, seed 1, with the
 # hyper-parameters chosen by the short tuning recorded in agents/BASELINES.md. The run goes to
 # runs/baselines/<name>-final/; its checkpoint (weights only), log, curve and arguments are copied
-# into agents/<dir>/, which is then scored on the paper suite with cdr-bench evaluate and timed
-# with cdr-bench latency.
+# into agents/<dir>/, which is timed with cdr-bench latency. Finally the leaderboard build scores
+# the trained baselines (their entries have the same names) on the paper suite, each in its own
+# sandboxed process, into leaderboard/results/<name>.json|.jsonl - the one committed copy of
+# each evaluation - and re-renders the leaderboard and the docs' results tables.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${1:-1374560}
@@ -37,9 +39,10 @@ for name in "${names[@]}"; do
     cp "$run/log.jsonl" "$ag/training_log.jsonl"
     cp "$run/args.json" "$ag/train_args.json"
     [ -f "$run/curve.png" ] && cp "$run/curve.png" "$ag/curve.png"
-    mkdir -p "$ag/eval" "$ag/analysis"
-    echo "$(date -u +%T) evaluate $name"
-    "$py" -m cdr_bench evaluate "$ag" --out "$ag/eval/paper.json" --no-progress > "$ag/eval/paper.txt"
+    mkdir -p "$ag/analysis"
     "$py" -m cdr_bench latency "$ag" --out "$ag/analysis/latency.json" > "$ag/analysis/latency.md"
-    echo "$(date -u +%T) done $name"
+    echo "$(date -u +%T) trained $name"
 done
+echo "$(date -u +%T) evaluate ${names[*]}"
+"$py" -m cdr_bench leaderboard build --evaluate "${names[@]}"
+echo "$(date -u +%T) done"

@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
-# Score the shipped Diffusion-AC checkpoint and its Table-3 ablations with the official scorer,
-# then the multimodality analysis (Fig. 9) on the three tactical scenarios and the latency.
+# Score the shipped Diffusion-AC checkpoint and its Table-3 ablations with the official scorer
+# (their leaderboard entries, each in its own sandboxed process), then time the agent.
 #
 #   PYTHON=.venv/bin/python bash agents/diffusion_ac/evaluate_all.sh [main] [ablations] [analysis]
 #
 # With no argument all three parts run. Outputs (all deterministic for a given checkpoint):
-#   eval/paper.json(.jsonl)                 checkpoint.pt on the paper suite (1000 episodes each)
-#   eval/ablation-<name>.json(.jsonl)       ablations/<name>.pt on the paper suite
-#   analysis/multimodal-<scenario>.json/.png (also agents/ppo/analysis/), analysis/latency.json/.md
+#   main       leaderboard/results/diffusion-ac.json|.jsonl (checkpoint.pt on the paper suite,
+#              1000 episodes each) and diffusion-ac.multimodal-<scenario>.json (Fig. 9)
+#   ablations  leaderboard/results/diffusion-ac-100k.json|.jsonl, diffusion-ac-no-<part>.*
+#              (ablations/<name>-100k.pt on the paper suite)
+#   analysis   analysis/latency.json and latency.md (cdr-bench latency)
+# The leaderboard build also re-renders the leaderboard and every results table in the docs
+# (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 py=${PYTHON:-python}
@@ -18,15 +22,12 @@ parts=("$@")
 for part in "${parts[@]}"; do
     case $part in
         main)
-            "$py" -m cdr_bench evaluate $ag --out $ag/eval/paper.json --no-progress ;;
+            "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac ;;
         ablations)
-            for ck in $ag/ablations/*-100k.pt; do
-                name=$(basename "$ck" .pt)
-                CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag \
-                    --out "$ag/eval/ablation-$name.json" --no-progress
-            done ;;
+            "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac-100k \
+                diffusion-ac-no-diffusion diffusion-ac-no-double-q diffusion-ac-no-dpsc \
+                diffusion-ac-no-value-guidance ;;
         analysis)
-            PYTHON=$py bash $ag/make_multimodal.sh  # Diffusion-AC (and PPO) on the tactical scenarios
             "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json > $ag/analysis/latency.md ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;
     esac
