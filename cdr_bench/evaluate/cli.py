@@ -66,21 +66,22 @@ def register(sub: Any) -> None:
     c.add_argument("--json", default=None, help="also write the comparison as JSON here")
     c.set_defaults(func=_compare)
 
-    r = sub.add_parser("report", help="Markdown table of result files (results/README.md)")
+    r = sub.add_parser(
+        "report",
+        help="Markdown table of result files (every metric and role, 95 % intervals)",
+        description="One Markdown table over result JSON files (one row per agent, scenario "
+        "and aircraft role, every metric with its 95 % interval), rendered by "
+        "cdr_bench.evaluate.report like every other results table. The tables in the "
+        "repository's docs are rendered by `cdr-bench leaderboard build` / `render-docs`.",
+    )
     r.add_argument("results", nargs="+", help="result JSON files")
     r.add_argument("--out", default=None, help="write here instead of printing")
-    r.add_argument(
-        "--update-readme",
-        default=None,
-        metavar="FILE",
-        help="also write the compact table between the <!-- reference-agents --> markers of FILE",
-    )
     r.set_defaults(func=_report)
 
 
 def _evaluate(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
-    from cdr_bench.evaluate.report import summary_table
+    from cdr_bench.evaluate.report import summary_text
     from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE, DEFAULT_DECISION_TIMEOUT_S
 
     suite = args.suite if (args.suite or args.scenario) else "paper"
@@ -104,7 +105,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         backend=args.backend,
         address=args.address,
     )
-    print(summary_table(result))
+    print(summary_text(result))
     print(f"wrote {out} and {out.with_suffix('.jsonl')}")
     return 0
 
@@ -121,7 +122,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from cdr_bench.evaluate.report import compact_table, results_readme, update_marked_block
+    from cdr_bench.evaluate.report import report_markdown
     from cdr_bench.evaluate.results import atomic_write_text, read_result
 
     loaded = []
@@ -130,18 +131,7 @@ def _report(args: argparse.Namespace) -> int:
             loaded.append((p, read_result(p)))
         except ValueError as e:
             raise UserError(str(e)) from None
-    cmd = "cdr-bench report " + " ".join(args.results) + (f" --out {args.out}" if args.out else "")
-    if args.update_readme:
-        cmd += f" --update-readme {args.update_readme}"
-    text = results_readme(loaded, cmd)
-    if args.update_readme:
-        readme = Path(args.update_readme)
-        try:
-            new = update_marked_block(readme.read_text(), compact_table(loaded))
-        except (OSError, ValueError) as e:
-            raise UserError(f"--update-readme {readme}: {e}") from None
-        atomic_write_text(readme, new)
-        print(f"updated {readme}")
+    text = report_markdown(loaded)
     if args.out:
         atomic_write_text(Path(args.out), text)
         print(f"wrote {args.out}")

@@ -1,151 +1,535 @@
-"""Tables from result files: the plain-text summary printed by ``cdr-bench evaluate`` and the
-Markdown reference table written by ``cdr-bench report`` (results/README.md). Reads results only.
+"""Every results table of cdr-bench, with one column list (:data:`COLUMNS`) and one set of
+number formats. Pure functions of result data (this module reads no file and evaluates nothing):
+
+* the summary printed by ``cdr-bench evaluate`` and the Markdown of ``cdr-bench report``;
+* the leaderboard's tables (per scenario, entries, published, published vs measured), laid out
+  into ``leaderboard/README.md`` and ``index.html`` by :mod:`cdr_bench.leaderboard.render`;
+* the tables in the marked blocks of ``README.md``, ``agents/BASELINES.md`` and
+  ``agents/diffusion_ac/README.md``, whose inputs (the leaderboard's result files, the paper's
+  published tables, training, tuning and latency logs) :mod:`cdr_bench.leaderboard.tables`
+  gathers (``cdr-bench leaderboard build`` / ``render-docs``).
+
+It sits in the evaluator's layer so that ``cdr-bench evaluate`` and the leaderboard above it
+share it; it imports nothing from the leaderboard or the trainers.
 """
 
 from __future__ import annotations
 
-import re
-import textwrap
+import html
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
-_COLUMNS = (
-    ("success", "success_rate", "rate"),
-    ("LoS", "los_rate", "rate"),
-    ("NMAC", "nmac_rate", "rate"),
-    ("timeout", "timeout_rate", "rate"),
-    ("ended by LoS", "los_terminated_rate", "rate"),
-    ("boundary", "boundary_rate", "rate"),
-    ("steps (success)", "avg_steps_success", "mean"),
-    ("clean success", "clean_success_rate", "rate"),
-    ("R_G", "goal_reward", "mean"),
-    ("R_S", "safety_reward", "mean"),
-    ("invalid", "invalid_action_rate", "rate"),
+from cdr_bench.actions import decode
+
+
+@dataclass(frozen=True)
+class Column:
+    header: str
+    key: str
+    """Metric key in a result's ``metrics`` (and in ``cdr-bench compare``)."""
+    kind: str
+    """``rate`` (a fraction, shown in %) or ``mean``."""
+    higher: bool
+    """Higher is better."""
+    detail: bool = False
+    """Only in the full per-result tables (``cdr-bench evaluate`` / ``report``)."""
+
+
+COLUMNS: tuple[Column, ...] = (
+    Column("success", "success_rate", "rate", True),
+    Column("LoS", "los_rate", "rate", False),
+    Column("NMAC", "nmac_rate", "rate", False),
+    Column("timeout", "timeout_rate", "rate", False),
+    Column("ended by LoS", "los_terminated_rate", "rate", False, detail=True),
+    Column("boundary", "boundary_rate", "rate", False, detail=True),
+    Column("steps (success)", "avg_steps_success", "mean", False),
+    Column("clean success", "clean_success_rate", "rate", True),
+    Column("R_G", "goal_reward", "mean", True),
+    Column("R_S", "safety_reward", "mean", True),
+    Column("invalid", "invalid_action_rate", "rate", False),
 )
+"""The one column list: the paper's five metrics, clean success, the goal and safety rewards,
+the share of masked (invalid) actions, and two outcome details."""
+
+MAIN_COLUMNS: tuple[Column, ...] = tuple(c for c in COLUMNS if not c.detail)
+"""The columns of the leaderboard and of the documentation tables."""
+
+DENSITIES = ("low", "medium", "high")
+LATENCY_HEADER = "latency ms med / p99"
 
 
-def _fmt(m: dict[str, Any], kind: str, ci: bool) -> str:
+# ----------------------------------------------------------------------------------------------
+# Formats
+
+
+def fmt_value(kind: str, v: float | None) -> str:
+    if v is None:
+        return "-"
+    return f"{100 * v:.1f}%" if kind == "rate" else f"{v:.2f}"
+
+
+def fmt_metric(kind: str, m: dict[str, Any], ci: bool = True) -> str:
+    """A measured metric ``{"value", "ci95"}``: point value, with its 95 % interval if ``ci``."""
     v = m.get("value")
     if v is None:
         return "-"
-    lo, hi = m.get("ci95", [None, None])
+    lo, hi = m.get("ci95") or (None, None)
+    if not ci or lo is None or hi is None:
+        return fmt_value(kind, v)
     if kind == "rate":
-        s = f"{100 * v:.1f}%"
-        return f"{s} [{100 * lo:.1f}, {100 * hi:.1f}]" if ci and lo is not None else s
-    s = f"{v:.2f}"
-    return f"{s} [{lo:.2f}, {hi:.2f}]" if ci and lo is not None else s
+        return f"{100 * v:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
+    return f"{v:.2f} [{lo:.2f}, {hi:.2f}]"
 
 
-def _rows(result: dict[str, Any], ci: bool) -> list[list[str]]:
+def fmt_published(kind: str, v: float | None) -> str:
+    """A number of the paper as transcribed (rates are already in %)."""
+    if v is None:
+        return "-"
+    return f"{v:g}%" if kind == "rate" else f"{v:g}"
+
+
+def fmt_ms(x: float | None) -> str:
+    return "-" if x is None else f"{x:.3g}"
+
+
+def fmt_latency(lat: dict[str, Any] | None) -> str:
+    if not lat or lat.get("median") is None:
+        return "-"
+    return f"{fmt_ms(lat['median'])} / {fmt_ms(lat.get('p99'))}"
+
+
+# ----------------------------------------------------------------------------------------------
+# Cells and table formats (Markdown, plain text, HTML)
+
+
+@dataclass(frozen=True)
+class Cell:
+    text: str
+    sort: float | str | None = None
+    best: bool = False
+    mark: str = ""
+
+
+Rows = list[list[Cell]]
+
+
+def _md_cell(c: Cell) -> str:
+    t = c.text.replace("|", "\\|")
+    if c.best and t != "-":
+        t = f"**{t}**"
+    return f"{t} {c.mark}" if c.mark else t
+
+
+def md_table(
+    head: Sequence[str], rows: Rows, numeric_from: int = 2, text_from: int | None = None
+) -> str:
+    """Markdown; columns from ``numeric_from`` on (up to ``text_from``) are right-aligned."""
+    end = len(head) if text_from is None else text_from
+    align = ["---:" if numeric_from <= i < end else "---" for i in range(len(head))]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def text_table(head: Sequence[str], rows: Rows, numeric_from: int = 2) -> str:
+    """Plain text, columns padded; columns from ``numeric_from`` on are right-aligned."""
+    grid = [list(head)] + [[c.text for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in grid) for i in range(len(head))]
+
+    def line(r: list[str]) -> str:
+        return "  ".join(
+            c.rjust(w) if i >= numeric_from else c.ljust(w)
+            for i, (c, w) in enumerate(zip(r, widths, strict=True))
+        ).rstrip()
+
+    out = [line(grid[0]), "  ".join("-" * w for w in widths)]
+    return "\n".join(out + [line(r) for r in grid[1:]])
+
+
+def _esc(s: str) -> str:
+    return html.escape(s, quote=True)
+
+
+def inline_md(s: str) -> str:
+    """Escape, then render `code` and **bold** (the only inline Markdown the pages use)."""
+    parts = _esc(s).split("`")
+    for i in range(1, len(parts), 2):
+        parts[i] = f"<code>{parts[i]}</code>"
+    text = "".join(parts)
+    bits = text.split("**")
+    for i in range(1, len(bits), 2):
+        bits[i] = f"<strong>{bits[i]}</strong>"
+    return "".join(bits)
+
+
+def html_table(tid: str, head: Sequence[str], rows: Rows, cls: str = "") -> str:
+    """A sortable HTML table (``data-sort`` keys; the page's script sorts on click)."""
+    out = [
+        '<div class="scroll">',
+        f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">',
+    ]
+    out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in head) + "</tr></thead>")
+    out.append("<tbody>")
+    for r in rows:
+        tds = []
+        for c in r:
+            attrs = ""
+            if c.sort is not None:
+                attrs += f' data-sort="{_esc(str(c.sort))}"'
+            if c.best and c.text != "-":
+                attrs += ' class="best"'
+            mark = f'<span class="mark">{c.mark}</span>' if c.mark else ""
+            tds.append(f"<td{attrs}>{inline_md(c.text)}{mark}</td>")
+        out.append("<tr>" + "".join(tds) + "</tr>")
+    out.append("</tbody></table></div>")
+    return "\n".join(out)
+
+
+# ----------------------------------------------------------------------------------------------
+# The leaderboard's tables (from the data of :func:`cdr_bench.leaderboard.data.build_data`)
+
+HIGHER, LOWER = "▲", "▼"
+
+
+def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[str], Rows]:
+    names = {e["name"]: e["display_name"] for e in data["entries"]}
+    head = ["#", "entry"] + [c.header for c in MAIN_COLUMNS] + [LATENCY_HEADER]
     rows = []
-    for sc in result["scenarios"]:
-        lat = result.get("timing", {}).get("decision_latency", {}).get(sc["id"], {})
-        per = lat.get("per_decision_ms", {})
-        lat_s = f"{per['median']:.3g} / {per['p99']:.3g}" if per.get("median") is not None else "-"
-        for role, m in sc["metrics"].items():
-            row = [sc["id"], role, str(m["episodes"])]
-            row += [_fmt(m[key], kind, ci) for _, key, kind in _COLUMNS]
-            row.append(lat_s)
+    for r in table["rows"]:
+        ref = r["entry"] == data["reference"]
+        row = [
+            Cell(str(r["rank"]), r["rank"]),
+            Cell(names[r["entry"]] + (" (reference)" if ref else ""), names[r["entry"]]),
+        ]
+        for c in MAIN_COLUMNS:
+            m = r["metrics"][c.key]
+            vs = r["vs_reference"][c.key]
+            mark = ""
+            if isinstance(vs, dict) and vs["significant"]:
+                mark = HIGHER if vs["direction"] == "higher" else LOWER
+            row.append(
+                Cell(fmt_metric(c.kind, m), m["value"], r["entry"] in table["best"][c.key], mark)
+            )
+        lat = r["latency_ms"]
+        row.append(Cell(fmt_latency(lat), lat["median"], r["entry"] in table["best"]["latency_ms"]))
+        rows.append(row)
+    return head, rows
+
+
+def entries_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
+    head = ["entry", "what", "agent", "checkpoint", "authors", "reference", "training", "sha256"]
+    rows = []
+    for e in data["entries"]:
+        rows.append(
+            [
+                Cell(e["display_name"], e["display_name"]),
+                Cell(e["description"]),
+                Cell(f"`{e['agent']}`"),
+                Cell(f"`{e['checkpoint']}`" if e["checkpoint"] else "-"),
+                Cell(", ".join(e["authors"])),
+                Cell(e["reference"]),
+                Cell(f"`{e['training']}`" if e["training"] else "scripted (no training)"),
+                Cell(f"`{e['agent_sha256'][:12]}`"),
+            ]
+        )
+    return head, rows
+
+
+def published_table(
+    first: str, columns: Sequence[str], rows: Iterable[tuple[str, str, Mapping[str, float]]]
+) -> tuple[list[str], Rows]:
+    """One of the paper's tables as transcribed: ``(row name, density, column -> value)``."""
+    head = [first, "density", *columns]
+    out = [
+        [Cell(name, name), Cell(density, density)]
+        + [Cell(f"{values[c]:g}", values[c]) for c in columns]
+        for name, density, values in rows
+    ]
+    return head, out
+
+
+def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], Rows]]:
+    names = {e["name"]: e["display_name"] for e in data["entries"]}
+    kinds = {c.key: c.kind for c in COLUMNS}
+    by_entry: dict[str, list[dict[str, Any]]] = {}
+    for block in data["published_vs_measured"]:
+        by_entry.setdefault(block["entry"], []).append(block)
+    out = []
+    for entry, blocks in by_entry.items():
+        head = ["metric"]
+        for b in blocks:
+            head += [f"{b['scenario']} published", f"{b['scenario']} measured here"]
+        cols = [r["column"] for r in blocks[0]["rows"]]
+        rows = []
+        for i, col in enumerate(cols):
+            row = [Cell(col)]
+            for b in blocks:
+                r = b["rows"][i]
+                kind = kinds.get(r["metric"], "mean")
+                row += [
+                    Cell(fmt_published(kind, r["published"]), r["published"]),
+                    Cell(fmt_metric(kind, r["measured"])),
+                ]
             rows.append(row)
+        title = (
+            f"{names[entry]} — published as “{blocks[0]['published_as']}” ({blocks[0]['table']})"
+        )
+        out.append((title, head, rows))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# One result file: ``cdr-bench evaluate`` (plain text) and ``cdr-bench report`` (Markdown)
+
+
+def _result_rows(result: dict[str, Any], ci: bool, label: str | None = None) -> Rows:
+    rows = []
+    latency = result.get("timing", {}).get("decision_latency", {})
+    for sc in result["scenarios"]:
+        lat = fmt_latency(latency.get(sc["id"], {}).get("per_decision_ms"))
+        for role, m in sc["metrics"].items():
+            row = [Cell(label)] if label is not None else []
+            row += [Cell(sc["id"]), Cell(role), Cell(str(m["episodes"]))]
+            row += [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in COLUMNS]
+            rows.append(row + [Cell(lat)])
     return rows
 
 
-HEADER = ["scenario", "aircraft", "n"] + [c[0] for c in _COLUMNS] + ["latency ms med/p99"]
+_RESULT_HEAD = ["scenario", "aircraft", "episodes", *[c.header for c in COLUMNS], LATENCY_HEADER]
 
 
-def summary_table(result: dict[str, Any]) -> str:
-    """Plain-text table of every scenario and role (point values; intervals are in the JSON)."""
-    rows = [HEADER] + _rows(result, ci=False)
-    widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
-    lines = [
-        "  ".join(
-            c.rjust(w) if i > 1 else c.ljust(w)
-            for i, (c, w) in enumerate(zip(r, widths, strict=True))
-        )
-        for r in rows
-    ]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return f"agent {result['agent']['name']} ({result['agent']['path']})\n" + "\n".join(lines)
+def summary_text(result: dict[str, Any]) -> str:
+    """Every scenario and role of one result, point values (intervals are in the JSON)."""
+    table = text_table(_RESULT_HEAD, _result_rows(result, ci=False))
+    return f"agent {result['agent']['name']} ({result['agent']['path']})\n{table}"
 
 
-def markdown_table(results: list[tuple[str, dict[str, Any]]], ci: bool = True) -> str:
-    """One Markdown table over several results (``(path, result)`` pairs), one row per agent,
-    scenario and role, with 95 % intervals."""
-    head = ["agent"] + HEADER
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 3 + "---:|" * (len(head) - 3)]
+REPORT_NOTE = (
+    "Rates are per episode with 95 % Wilson intervals; means (steps of successful episodes, "
+    "episode sums of the goal and safety rewards R_G / R_S) with 95 % bootstrap intervals. LoS "
+    "counts episodes with at least one loss of separation whatever the outcome (an NMAC is also "
+    "a LoS); success, NMAC, timeout, ended by LoS (only where a LoS ends the episode) and "
+    "boundary (only where leaving the sector ends it) partition the episodes. Invalid is the "
+    "share of decisions that chose a masked action. Latency is per decision (one batched call / "
+    "decisions in it), in ms, machine-dependent."
+)
+
+
+def report_markdown(results: list[tuple[str, dict[str, Any]]]) -> str:
+    """``cdr-bench report``: one Markdown table over several results, one row per agent,
+    scenario and role, every metric with its 95 % interval; then the files."""
+    rows: Rows = []
     for _path, res in results:
-        for row in _rows(res, ci):
-            lines.append("| " + " | ".join([res["agent"]["name"], *row]) + " |")
-    return "\n".join(lines)
-
-
-def results_readme(results: list[tuple[str, dict[str, Any]]], command: str) -> str:
-    """The text of results/README.md."""
-    r0 = results[0][1]
+        rows += _result_rows(res, ci=True, label=res["agent"]["name"])
     files = "\n".join(
         f"- `{p}`: agent `{r['agent']['path']}` sha256 `{r['agent']['sha256'][:16]}`, "
-        f"base seed {r['base_seed']}, {sum(s['episodes'] for s in r['scenarios'])} episodes"
+        f"base seed {r['base_seed']}, {sum(s['episodes'] for s in r['scenarios'])} episodes, "
+        f"cdr-bench {r['versions'].get('cdr-bench')}"
         for p, r in results
     )
-    intro = textwrap.fill(
-        f"cdr-bench {r0['versions'].get('cdr-bench')}, numpy {r0['versions'].get('numpy')}, "
-        f"python {r0['versions'].get('python')}. Rates are per episode with 95 % Wilson "
-        "intervals; means (steps of successful episodes, episode sums of the goal and safety "
-        "rewards R_G / R_S) with 95 % bootstrap intervals. LoS counts episodes with at least one "
-        "loss of separation whatever the outcome (an NMAC is also a LoS); success, NMAC, "
-        "timeout, ended by LoS (only where a LoS ends the episode) and boundary (only where "
-        "leaving the sector ends it) partition the episodes. Latency is per decision (one "
-        "batched call / decisions in it), in ms, machine-dependent.",
-        width=96,
-    )
-    return f"""# Reference results
-
-Generated from the result files below by `{command}`; do not edit by hand.
-
-{intro}
-
-{markdown_table(results)}
-
-Result files:
-
-{files}
-"""
+    table = md_table(["agent", *_RESULT_HEAD], rows, numeric_from=3)
+    return f"# cdr-bench results\n\n{REPORT_NOTE}\n\n{table}\n\nResult files:\n\n{files}\n"
 
 
-def compact_table(results: list[tuple[str, dict[str, Any]]]) -> str:
-    """Point values of the paper's five metrics and clean success, one row per agent and
-    scenario (ownship): the table of the top-level README."""
-    keys = [
-        ("success", "success_rate"),
-        ("LoS", "los_rate"),
-        ("NMAC", "nmac_rate"),
-        ("timeout", "timeout_rate"),
-        ("steps (success)", "avg_steps_success"),
-        ("clean success", "clean_success_rate"),
-    ]
-    lines = [
-        "| agent | scenario | episodes | " + " | ".join(k for k, _ in keys) + " |",
-        "|---|---|" + "---:|" * (len(keys) + 1),
-    ]
-    for _path, res in results:
+# ----------------------------------------------------------------------------------------------
+# The tables of the documentation (the inputs are gathered by cdr_bench.leaderboard.tables)
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    """A row of the paper's tables, shown beside a measured row of the same scenario."""
+
+    label: str
+    scenario: str
+    episodes: int | None
+    values: Mapping[str, float]
+    """Metric key (as in :data:`COLUMNS`) -> value as published (rates in %)."""
+
+
+def measured_table(
+    entries: Iterable[tuple[str, dict[str, Any], Sequence[PaperRow]]],
+    scenarios: Sequence[str] | None = None,
+    ci: bool = True,
+) -> str:
+    """Ownship metrics of results (``(label, result, paper rows)``), one row per result and
+    scenario (``scenarios``: these only, in the result's order), each followed by the paper's
+    rows of the same scenario, marked *published*."""
+    head = ["agent", "scenario", "episodes", *[c.header for c in MAIN_COLUMNS]]
+    rows: Rows = []
+    for label, res, paper in entries:
         for sc in res["scenarios"]:
+            if scenarios is not None and sc["id"] not in scenarios:
+                continue
             m = sc["metrics"]["ownship"]
-            cells = [
-                _fmt(m[key], "mean" if key.startswith("avg") else "rate", False) for _, key in keys
-            ]
-            lines.append(
-                f"| {res['agent']['name']} | {sc['id']} | {sc['episodes']} | "
-                + " | ".join(cells)
-                + " |"
+            rows.append(
+                [Cell(label), Cell(sc["id"]), Cell(str(m["episodes"]))]
+                + [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in MAIN_COLUMNS]
             )
-    return "\n".join(lines)
+            for p in paper:
+                if p.scenario == sc["id"]:
+                    rows.append(
+                        [
+                            Cell(p.label),
+                            Cell(p.scenario),
+                            Cell("-" if p.episodes is None else str(p.episodes)),
+                        ]
+                        + [Cell(fmt_published(c.kind, p.values.get(c.key))) for c in MAIN_COLUMNS]
+                    )
+    return md_table(head, rows, numeric_from=2)
 
 
-MARKER = "reference-agents"
+_PSI = {-1: "left", 0: "hold", 1: "right"}
+_V = {-1: "slower", 0: "keep", 1: "faster"}
+_H = {-1: "descend", 0: "level", 1: "climb"}
 
 
-def update_marked_block(text: str, block: str, marker: str = MARKER) -> str:
-    """Replace the text between ``<!-- marker:start -->`` and ``<!-- marker:end -->``."""
-    pattern = re.compile(rf"(<!-- {marker}:start -->\n).*?(<!-- {marker}:end -->)", re.S)
-    if not pattern.search(text):
-        raise ValueError(f"no <!-- {marker}:start --> ... <!-- {marker}:end --> block")
-    return pattern.sub(lambda m: m.group(1) + block + "\n" + m.group(2), text)
+def action_label(a: int) -> str:
+    p, v, h = decode(a)
+    return f"{a} {_PSI[p]}/{_V[v]}/{_H[h]}"
+
+
+def multimodality_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
+    """``cdr-bench multimodal`` results (``(label, its JSON)``): first-action samples."""
+    head = [
+        "agent",
+        "scenario",
+        "samples",
+        "follow-on success",
+        "modes (successful)",
+        "normalised entropy",
+        "distinct first actions",
+        "most sampled first actions (share of all samples)",
+    ]
+    rows: Rows = []
+    for label, d in runs:
+        counts = d["all"]
+        top = sorted(range(len(counts)), key=lambda a: (-counts[a], a))[:3]
+        tops = ", ".join(
+            f"{action_label(a)} ({100 * counts[a] / d['samples']:.0f} %)" for a in top if counts[a]
+        )
+        thr = d.get("threshold")
+        ent = d.get("normalised_entropy")
+        rows.append(
+            [
+                Cell(label),
+                Cell(d["scenario"]),
+                Cell(str(d["samples"])),
+                Cell(fmt_value("rate", d["success_rate"])),
+                Cell(f"{d['modes']}" + ("" if thr is None else f" (≥ {100 * thr:g} %)")),
+                Cell("-" if ent is None else f"{ent:.3f}"),
+                Cell(str(sum(1 for c in counts if c))),
+                Cell(tops or "-"),
+            ]
+        )
+    return md_table(head, rows, numeric_from=2, text_from=len(head) - 1)
+
+
+def latency_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
+    """``cdr-bench latency`` results (``(label, its JSON)``): one decision per call, and per
+    decision at the largest batch measured."""
+    head = [
+        "agent",
+        "threads",
+        "median ms / decision (batch 1)",
+        "p99 ms (batch 1)",
+        "largest batch",
+        "median ms / decision (largest batch)",
+    ]
+    rows: Rows = []
+    for label, d in runs:
+        by_batch = {r["batch"]: r for r in d["rows"]}
+        one = by_batch.get(1)
+        big = by_batch[max(by_batch)]
+        rows.append(
+            [
+                Cell(label),
+                Cell(str(d.get("threads", "-"))),
+                Cell("-" if one is None else fmt_ms(one["median_ms_per_decision"])),
+                Cell("-" if one is None else fmt_ms(one["p99_ms"])),
+                Cell(str(big["batch"])),
+                Cell(fmt_ms(big["median_ms_per_decision"])),
+            ]
+        )
+    return md_table(head, rows, numeric_from=1)
+
+
+def latency_detail_table(d: dict[str, Any]) -> str:
+    """Every batch size of one ``cdr-bench latency`` result."""
+    head = ["batch", "calls", "median ms / call", "p99 ms / call", "median ms / decision"]
+    rows = [
+        [
+            Cell(str(r["batch"])),
+            Cell(str(r.get("calls", "-"))),
+            Cell(f"{r['median_ms']:.3f}"),
+            Cell(f"{r['p99_ms']:.3f}"),
+            Cell(f"{r['median_ms_per_decision']:.4f}"),
+        ]
+        for r in d["rows"]
+    ]
+    note = f"{d.get('threads', '-')} thread(s), scenario `{d.get('scenario', '-')}`."
+    return md_table(head, rows, numeric_from=0) + "\n\n" + note
+
+
+def training_summary(final: dict[str, Any], log: str, stages: int | None = None) -> str:
+    """One sentence from the ``final`` line of a Diffusion-AC training log."""
+    of = f" of {stages}" if stages else ""
+    return (
+        f"Training (`{log}`): {final['step']:,} transitions, {final['updates']:,} updates, "
+        f"{final['wall_s'] / 60:.0f} min wall, final DPSC stage {final['stage']}{of}."
+    )
+
+
+def quick_eval_table(runs: Iterable[tuple[str, dict[str, Any]]], scenario: str) -> str:
+    """The trainers' own quick evaluation (``final`` lines of training logs) on ``scenario``."""
+    head = ["run", "transitions", "success", "LoS", "NMAC", "timeout", "episodes"]
+    rows: Rows = []
+    for label, f in runs:
+        e = f[f"eval/{scenario}"]
+        rows.append(
+            [Cell(label), Cell(f"{f['step']:,}")]
+            + [Cell(fmt_value("rate", e[k])) for k in ("success", "los", "nmac", "timeout")]
+            + [Cell(str(e["episodes"]))]
+        )
+    return md_table(head, rows, numeric_from=1)
+
+
+TUNING_FLAGS = ("ent_coef", "combine", "lr", "n_envs", "curriculum", "scenario", "total_steps")
+
+
+def tuning_table(runs: Iterable[tuple[str, str, dict[str, Any], list[dict[str, Any]]]]) -> str:
+    """Tuning runs (``(agent, run, its arguments, its log lines)``): the trainer's quick
+    evaluation per density, or the last rolling training success of a run cut before its
+    budget."""
+    head = [
+        "agent",
+        "run",
+        "key flags",
+        "transitions",
+        "DPSC stage",
+        "success low / medium / high",
+        "LoS low / medium / high",
+    ]
+    rows: Rows = []
+    for agent, run, args, lines in runs:
+        finals = [r["final"] for r in lines if "final" in r]
+        flags = ", ".join(f"{k}={args[k]}" for k in TUNING_FLAGS if k in args)
+        if finals:
+            f = finals[-1]
+            ev = [f[f"eval/{d}"] for d in DENSITIES]
+            cells = [
+                f"{f['step']:,}",
+                str(f["stage"]),
+                " / ".join(f"{e['success']:.2f}" for e in ev),
+                " / ".join(f"{e['los']:.2f}" for e in ev),
+            ]
+        else:
+            last = lines[-1]
+            cells = [
+                f"{last['step']:,} (cut)",
+                str(last.get("curriculum/stage", "-")),
+                f"rolling training success {last.get('charts/success_rolling', 0):.2f}",
+                "-",
+            ]
+        rows.append([Cell(agent), Cell(run), Cell(flags)] + [Cell(c) for c in cells])
+    return md_table(head, rows, numeric_from=3, text_from=5)

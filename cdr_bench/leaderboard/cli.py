@@ -1,4 +1,4 @@
-"""``cdr-bench leaderboard build`` (registered by :mod:`cdr_bench.cli`)."""
+"""``cdr-bench leaderboard build`` and ``render-docs`` (registered by :mod:`cdr_bench.cli`)."""
 
 from __future__ import annotations
 
@@ -17,9 +17,11 @@ def register(sub: Any) -> None:
         "build",
         help="render the leaderboard from result files; --evaluate re-runs submissions first",
         description="Render leaderboard/README.md, index.html, leaderboard.json and plots/ from "
-        "the submissions and the result files in leaderboard/results. With --evaluate, first "
+        "the submissions and the result files in leaderboard/results, then the results tables "
+        "in the marked blocks of the repository's docs (as render-docs). With --evaluate, first "
         "score every submission (or the named ones) in its own sandboxed process. With --check, "
-        "re-evaluate and fail (exit code 1, with a diff) if the committed leaderboard differs.",
+        "re-evaluate and fail (exit code 1, with a diff) if the committed leaderboard or a "
+        "docs block differs.",
     )
     b.add_argument(
         "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
@@ -65,6 +67,26 @@ def register(sub: Any) -> None:
     )
     b.set_defaults(func=_build)
 
+    d = lb_sub.add_parser(
+        "render-docs",
+        help="rewrite the results tables in the docs' marked blocks from leaderboard/results",
+        description="Rewrite every marked block (<!-- name:start --> ... <!-- name:end -->) of "
+        "README.md, agents/BASELINES.md and agents/diffusion_ac/README.md from the committed "
+        "files: leaderboard/results, leaderboard/published and the agents' training and "
+        "latency logs (what each block shows: cdr_bench/leaderboard/tables.py; rendered by "
+        "cdr_bench/evaluate/report.py). Reads result files only; `build` "
+        "does this too.",
+    )
+    d.add_argument(
+        "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
+    )
+    d.add_argument(
+        "--check",
+        action="store_true",
+        help="write nothing; exit code 1 and a diff if a block differs from what the files give",
+    )
+    d.set_defaults(func=_render_docs)
+
 
 def _build(args: argparse.Namespace) -> int:
     from cdr_bench.errors import UserError
@@ -87,4 +109,40 @@ def _build(args: argparse.Namespace) -> int:
         limits=Limits(cpu_s=args.cpu_limit, memory_mb=args.memory_limit, wall_s=args.timeout),
         reference=args.reference or DEFAULT_REFERENCE,
     )
-    return run(opts)
+    rc = run(opts)
+    if rc == 0 or args.check:
+        rc = max(rc, _docs(d, args.check))
+    return rc
+
+
+def _docs(lb_dir: Path, check: bool) -> int:
+    import sys
+
+    from cdr_bench.leaderboard.tables import render_docs
+
+    diffs = render_docs(lb_dir, check=check)
+    if check and diffs:
+        print(
+            "docs check FAILED: these marked blocks differ from what the result files give "
+            "(regenerate with `cdr-bench leaderboard render-docs`):\n",
+            file=sys.stderr,
+        )
+        print("\n\n".join(diffs), file=sys.stderr)
+        return 1
+    if check:
+        msg = "docs blocks match the result files"
+    elif diffs:
+        msg = f"rewrote the results blocks of {len(diffs)} doc file(s)"
+    else:
+        msg = "docs blocks already current"
+    print(f"cdr-bench leaderboard: {msg}", file=sys.stderr)
+    return 0
+
+
+def _render_docs(args: argparse.Namespace) -> int:
+    from cdr_bench.errors import UserError
+
+    d = Path(args.dir)
+    if not d.is_dir():
+        raise UserError(f"--dir {d}: no such folder")
+    return _docs(d, args.check)

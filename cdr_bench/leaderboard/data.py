@@ -22,35 +22,14 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate.compare import compare
 from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
+from cdr_bench.evaluate.report import DENSITIES, MAIN_COLUMNS
 from cdr_bench.evaluate.results import read_episodes, read_result
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
 from cdr_bench.leaderboard.submission import Submission
+from cdr_bench.leaderboard.tables import multimodal_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
 DATA_VERSION = 1
-
-COLUMNS: tuple[tuple[str, str, str, bool], ...] = (
-    # (header, metric key, kind, higher is better)
-    ("success", "success_rate", "rate", True),
-    ("LoS", "los_rate", "rate", False),
-    ("NMAC", "nmac_rate", "rate", False),
-    ("timeout", "timeout_rate", "rate", False),
-    ("steps (success)", "avg_steps_success", "mean", False),
-    ("clean success", "clean_success_rate", "rate", True),
-    ("R_G", "goal_reward", "mean", True),
-    ("R_S", "safety_reward", "mean", True),
-)
-"""The paper's five metrics, clean success, and the goal and safety rewards."""
-
-DENSITIES = ("low", "medium", "high")
-
-
-def result_path(results_dir: Path, name: str) -> Path:
-    return results_dir / f"{name}.json"
-
-
-def multimodal_path(results_dir: Path, name: str, scenario: str) -> Path:
-    return results_dir / f"{name}.multimodal-{scenario.replace('/', '_')}.json"
 
 
 @contextmanager
@@ -244,7 +223,7 @@ def build_data(
             m = s["metrics"]["ownship"]
             lat = e.result["timing"]["decision_latency"][sid]["per_decision_ms"]
             vs: dict[str, Any] = {}
-            for _, key, _, _ in COLUMNS:
+            for key in (c.key for c in MAIN_COLUMNS):
                 if e is ref:
                     vs[key] = "reference"
                     continue
@@ -262,7 +241,7 @@ def build_data(
                 {
                     "entry": e.sub.name,
                     "episodes": m["episodes"],
-                    "metrics": {key: _metric(m[key]) for _, key, _, _ in COLUMNS},
+                    "metrics": {c.key: _metric(m[c.key]) for c in MAIN_COLUMNS},
                     "latency_ms": {"median": lat["median"], "p99": lat["p99"]},
                     "vs_reference": vs,
                 }
@@ -275,8 +254,10 @@ def build_data(
                 rank, prev = i + 1, k
             r["rank"] = rank
         best: dict[str, list[str]] = {}
-        for _, key, _, higher in COLUMNS:
-            best[key] = _best([(r["entry"], r["metrics"][key]["value"]) for r in rows], higher)
+        for c in MAIN_COLUMNS:
+            best[c.key] = _best(
+                [(r["entry"], r["metrics"][c.key]["value"]) for r in rows], c.higher
+            )
         best["latency_ms"] = _best([(r["entry"], r["latency_ms"]["median"]) for r in rows], False)
         assert config is not None
         tables.append(

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.leaderboard.data import COLUMNS, DENSITIES
+from cdr_bench.evaluate.report import DENSITIES, MAIN_COLUMNS
 
 DPI = 80
-LABEL = {key: header for header, key, _, _ in COLUMNS}
+LABEL = {c.key: c.header for c in MAIN_COLUMNS}
 
 
 def matplotlib_version() -> str:
@@ -141,26 +141,35 @@ def _latency(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
 
 
 def _heatmap(mm: dict[str, Any], title: str) -> bytes:
-    """Fig. 9 style: successful first actions in three 3x3 panels (descend / level / climb),
-    heading change across, speed change up."""
+    """Fig. 9 style, two rows of three 3x3 panels (descend / level / climb; heading change
+    across, speed change up): every sampled first action, then those whose follow-on episode
+    succeeded, as shares of all samples (each row on its own colour scale, so that rare
+    successes stay visible)."""
     import matplotlib.pyplot as plt
 
-    c = np.asarray(mm["success"], float).reshape(3, 3, 3)  # (psi, v, h) as in cdr_bench.actions
-    tot = max(float(c.sum()), 1.0)
-    vmax = max(float(c.max()) / tot, 1e-9)
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.8))
-    im = None
-    for j, panel in enumerate(("descend", "level", "climb")):
-        ax = axes[j]
-        share = c[:, :, j].T / tot
-        im = ax.imshow(share, vmin=0, vmax=vmax, cmap="viridis", origin="lower")
-        ax.set_xticks(range(3), ["left 5°", "hold", "right 5°"])
-        ax.set_yticks(range(3), ["-50 kt", "keep", "+50 kt"] if j == 0 else ["", "", ""])
-        ax.set_title(panel)
-        for (r, k), v in np.ndenumerate(share):
-            ax.text(k, r, f"{v:.2f}", ha="center", va="center", color="w" if v < vmax / 2 else "k")
-    assert im is not None
-    fig.colorbar(im, ax=list(axes), shrink=0.8, label="share of successful samples")
+    n = max(float(sum(mm["all"])), 1.0)
+    fig, axes = plt.subplots(2, 3, figsize=(11, 6.8), squeeze=False)
+    for i, (label, counts) in enumerate(
+        (("all sampled", mm["all"]), ("successful", mm["success"]))
+    ):
+        c = np.asarray(counts, float).reshape(3, 3, 3) / n  # (psi, v, h) as in cdr_bench.actions
+        vmax = max(float(c.max()), 1e-9)
+        im = None
+        for j, panel in enumerate(("descend", "level", "climb")):
+            ax = axes[i, j]
+            share = c[:, :, j].T
+            im = ax.imshow(share, vmin=0, vmax=vmax, cmap="viridis", origin="lower")
+            ax.set_xticks(range(3), ["left 5°", "hold", "right 5°"])
+            ax.set_yticks(range(3), ["-50 kt", "keep", "+50 kt"] if j == 0 else ["", "", ""])
+            if j == 0:
+                ax.set_ylabel(f"{label} first actions")
+            ax.set_title(f"{panel}: {100 * share.sum():.1f}% of samples", fontsize=10)
+            for (r, k), v in np.ndenumerate(share):
+                ax.text(
+                    k, r, f"{v:.2f}", ha="center", va="center", color="w" if v < vmax / 2 else "k"
+                )
+        assert im is not None
+        fig.colorbar(im, ax=list(axes[i]), shrink=0.8, label="share of all samples")
     ent = mm.get("normalised_entropy")
     fig.suptitle(
         f"{title}: {mm['samples']} samples, follow-on success {100 * mm['success_rate']:.1f}%, "
@@ -180,9 +189,9 @@ def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
     with matplotlib.style.context("default"), matplotlib.rc_context({"svg.hashsalt": "cdr"}):
         dens = _density_tables(data)
         if dens:
-            for _, key, kind, _ in COLUMNS:
-                out[f"{key}.png"] = _grouped_bars(
-                    data, dens, key, kind, f"{LABEL[key]} per density (95 % intervals)"
+            for c in MAIN_COLUMNS:
+                out[f"{c.key}.png"] = _grouped_bars(
+                    data, dens, c.key, c.kind, f"{LABEL[c.key]} per density (95 % intervals)"
                 )
             out["success_vs_density.png"] = _success_vs_density(data, dens)
             out["latency.png"] = _latency(data, dens)

@@ -35,6 +35,8 @@ class PublishedRow:
     density: str
     values: dict[str, float]
     """Published column -> value (rates in %)."""
+    episodes: int | None = None
+    """Episodes behind the row in the paper (the table's ``episodes``; None if not stated)."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,8 @@ def _load(path: Path) -> dict[str, Any]:
     for col in data["columns"]:
         if col not in METRIC_OF_COLUMN:
             raise UserError(f"{path}: unknown column {col!r}")
+    if not isinstance(data.get("episodes", 0), int):
+        raise UserError(f"{path}: episodes: expected an integer")
     for i, r in enumerate(data["rows"]):
         if len(r.get("values", [])) != len(data["columns"]):
             raise UserError(f"{path}: rows[{i}]: expected {len(data['columns'])} values")
@@ -79,7 +83,11 @@ def load_published(leaderboard_dir: str | os.PathLike[str]) -> Published:
     t2, t3 = _load(d / "table2.yaml"), _load(d / "table3.yaml")
     rows = [
         PublishedRow(
-            "Table 2", r["agent"], r["density"], dict(zip(t2["columns"], r["values"], strict=True))
+            "Table 2",
+            r["agent"],
+            r["density"],
+            dict(zip(t2["columns"], r["values"], strict=True)),
+            t2.get("episodes"),
         )
         for r in t2["rows"]
     ]
@@ -89,6 +97,7 @@ def load_published(leaderboard_dir: str | os.PathLike[str]) -> Published:
             r["variant"],
             t3["density"],
             dict(zip(t3["columns"], r["values"], strict=True)),
+            t3.get("episodes"),
         )
         for r in t3["rows"]
     ]

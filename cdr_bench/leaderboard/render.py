@@ -10,13 +10,22 @@ from __future__ import annotations
 
 import base64
 import html
-from dataclasses import dataclass
 from typing import Any
 
-from cdr_bench.leaderboard.data import COLUMNS
+from cdr_bench.evaluate.report import (
+    HIGHER,
+    LOWER,
+    Rows,
+    entries_table,
+    html_table,
+    inline_md,
+    md_table,
+    published_table,
+    scenario_table,
+    side_by_side_tables,
+)
 from cdr_bench.leaderboard.published import Published
 
-HIGHER, LOWER = "▲", "▼"
 GENERATOR = "cdr-bench leaderboard build"
 
 INTRO = (
@@ -28,156 +37,27 @@ INTRO = (
     "(not marked when every entry ties). {up} / {down}: significantly higher / lower than "
     "{ref} on the same episodes (95 % paired bootstrap interval of the difference excludes 0; "
     "`cdr-bench compare`). Rows are ranked by success rate, then LoS rate, then NMAC rate. "
+    "Invalid is the share of decisions that chose a masked action. "
     "Latency is the median / p99 time per decision in ms (batched calls, one thread) on the "
     "machine that last ran `build --evaluate`: it is machine-dependent and `--check` does not "
     "re-measure it."
 )
 
 
-@dataclass(frozen=True)
-class Cell:
-    text: str
-    sort: float | str | None = None
-    best: bool = False
-    mark: str = ""
-
-
-def _fmt_value(kind: str, v: float | None) -> str:
-    if v is None:
-        return "-"
-    return f"{100 * v:.1f}%" if kind == "rate" else f"{v:.2f}"
-
-
-def _fmt_ci(kind: str, m: dict[str, Any]) -> str:
-    v = m["value"]
-    if v is None:
-        return "-"
-    lo, hi = m["ci95"]
-    if lo is None or hi is None:
-        return _fmt_value(kind, v)
-    if kind == "rate":
-        return f"{100 * v:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
-    return f"{v:.2f} [{lo:.2f}, {hi:.2f}]"
-
-
-def _fmt_ms(x: float | None) -> str:
-    return "-" if x is None else f"{x:.3g}"
-
-
-def scenario_table(
-    data: dict[str, Any], table: dict[str, Any]
-) -> tuple[list[str], list[list[Cell]]]:
-    names = {e["name"]: e["display_name"] for e in data["entries"]}
-    head = ["#", "entry"] + [h for h, _, _, _ in COLUMNS] + ["latency ms med / p99"]
-    rows = []
-    for r in table["rows"]:
-        ref = r["entry"] == data["reference"]
-        row = [
-            Cell(str(r["rank"]), r["rank"]),
-            Cell(names[r["entry"]] + (" (reference)" if ref else ""), names[r["entry"]]),
-        ]
-        for _, key, kind, _ in COLUMNS:
-            m = r["metrics"][key]
-            vs = r["vs_reference"][key]
-            mark = ""
-            if isinstance(vs, dict) and vs["significant"]:
-                mark = HIGHER if vs["direction"] == "higher" else LOWER
-            row.append(Cell(_fmt_ci(kind, m), m["value"], r["entry"] in table["best"][key], mark))
-        lat = r["latency_ms"]
-        row.append(
-            Cell(
-                f"{_fmt_ms(lat['median'])} / {_fmt_ms(lat['p99'])}",
-                lat["median"],
-                r["entry"] in table["best"]["latency_ms"],
-            )
-        )
-        rows.append(row)
-    return head, rows
-
-
-def entries_table(data: dict[str, Any]) -> tuple[list[str], list[list[Cell]]]:
-    head = ["entry", "what", "agent", "checkpoint", "authors", "reference", "training", "sha256"]
-    rows = []
-    for e in data["entries"]:
-        rows.append(
-            [
-                Cell(e["display_name"], e["display_name"]),
-                Cell(e["description"]),
-                Cell(f"`{e['agent']}`"),
-                Cell(f"`{e['checkpoint']}`" if e["checkpoint"] else "-"),
-                Cell(", ".join(e["authors"])),
-                Cell(e["reference"]),
-                Cell(f"`{e['training']}`" if e["training"] else "scripted (no training)"),
-                Cell(f"`{e['agent_sha256'][:12]}`"),
-            ]
-        )
-    return head, rows
-
-
-def published_tables(pub: Published) -> list[tuple[str, list[str], list[list[Cell]]]]:
-    out = []
-    for table, cols, cite in (
-        ("Table 2", pub.columns2, pub.citation2),
-        ("Table 3", pub.columns3, pub.citation3),
-    ):
-        head = ["agent" if table == "Table 2" else "variant", "density", *cols]
-        rows = [
-            [Cell(r.row, r.row), Cell(r.density, r.density)]
-            + [Cell(f"{r.values[c]:g}", r.values[c]) for c in cols]
-            for r in pub.table(table)
-        ]
-        out.append((f"{table} — {cite}", head, rows))
-    return out
-
-
-def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], list[list[Cell]]]]:
-    names = {e["name"]: e["display_name"] for e in data["entries"]}
-    kinds = {key: kind for _, key, kind, _ in COLUMNS}
-    by_entry: dict[str, list[dict[str, Any]]] = {}
-    for block in data["published_vs_measured"]:
-        by_entry.setdefault(block["entry"], []).append(block)
-    out = []
-    for entry, blocks in by_entry.items():
-        head = ["metric"]
-        for b in blocks:
-            head += [f"{b['scenario']} published", f"{b['scenario']} measured here"]
-        cols = [r["column"] for r in blocks[0]["rows"]]
-        rows = []
-        for i, col in enumerate(cols):
-            row = [Cell(col)]
-            for b in blocks:
-                r = b["rows"][i]
-                kind = kinds.get(r["metric"], "mean")
-                pub = f"{r['published']:g}" + ("%" if kind == "rate" else "")
-                row += [Cell(pub, r["published"]), Cell(_fmt_ci(kind, r["measured"]))]
-            rows.append(row)
-        title = (
-            f"{names[entry]} — published as “{blocks[0]['published_as']}” ({blocks[0]['table']})"
-        )
-        out.append((title, head, rows))
-    return out
-
-
-# ----------------------------------------------------------------------------------------------
-# Markdown
-
-
-def _md_cell(c: Cell) -> str:
-    t = c.text.replace("|", "\\|")
-    if c.best and t != "-":
-        t = f"**{t}**"
-    return f"{t} {c.mark}" if c.mark else t
-
-
-def md_table(head: list[str], rows: list[list[Cell]], numeric_from: int = 2) -> str:
-    align = ["---" if i < numeric_from else "---:" for i in range(len(head))]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
-    lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
 def _anchor(sid: str) -> str:
     return "scenario-" + sid.replace("/", "-")
+
+
+def published_tables(pub: Published) -> list[tuple[str, list[str], Rows]]:
+    """The paper's Tables 2 and 3 as transcribed: (title, header, rows)."""
+    out = []
+    for table, first, cols, cite in (
+        ("Table 2", "agent", pub.columns2, pub.citation2),
+        ("Table 3", "variant", pub.columns3, pub.citation3),
+    ):
+        rows = [(r.row, r.density, r.values) for r in pub.table(table)]
+        out.append((f"{table} — {cite}", *published_table(first, cols, rows)))
+    return out
 
 
 def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> str:
@@ -241,7 +121,13 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
         "then render",
         "cdr-bench leaderboard build                # render from the result files only",
         "cdr-bench leaderboard build --check        # re-run and compare with this folder",
+        "cdr-bench leaderboard render-docs          # only the tables in the repository's docs",
         "```",
+        "",
+        "`build` also rewrites the results tables in the marked blocks of the repository's "
+        "README.md, agents/BASELINES.md and agents/diffusion_ac/README.md from these result "
+        "files (rendered by `cdr_bench/evaluate/report.py`, the one table renderer; which block "
+        "shows what: `cdr_bench/leaderboard/tables.py`).",
         "",
     ]
     return "\n".join(out)
@@ -302,40 +188,6 @@ def _esc(s: str) -> str:
     return html.escape(s, quote=True)
 
 
-def _inline_md(s: str) -> str:
-    """Escape, then render `code` and **bold** (the only inline Markdown the pages use)."""
-    parts = _esc(s).split("`")
-    for i in range(1, len(parts), 2):
-        parts[i] = f"<code>{parts[i]}</code>"
-    text = "".join(parts)
-    bits = text.split("**")
-    for i in range(1, len(bits), 2):
-        bits[i] = f"<strong>{bits[i]}</strong>"
-    return "".join(bits)
-
-
-def html_table(tid: str, head: list[str], rows: list[list[Cell]], cls: str = "") -> str:
-    out = [
-        '<div class="scroll">',
-        f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">',
-    ]
-    out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in head) + "</tr></thead>")
-    out.append("<tbody>")
-    for r in rows:
-        tds = []
-        for c in r:
-            attrs = ""
-            if c.sort is not None:
-                attrs += f' data-sort="{_esc(str(c.sort))}"'
-            if c.best and c.text != "-":
-                attrs += ' class="best"'
-            mark = f'<span class="mark">{c.mark}</span>' if c.mark else ""
-            tds.append(f"<td{attrs}>{_inline_md(c.text)}{mark}</td>")
-        out.append("<tr>" + "".join(tds) + "</tr>")
-    out.append("</tbody></table></div>")
-    return "\n".join(out)
-
-
 def render_html(
     data: dict[str, Any], pub: Published, plots: dict[str, bytes], matplotlib_version: str
 ) -> str:
@@ -351,7 +203,7 @@ def render_html(
         '<nav><a href="#measured">Measured here</a><a href="#entries">Entries</a>'
         '<a href="#published">Published (paper)</a><a href="#side-by-side">Published vs '
         'measured</a><a href="#plots">Plots</a></nav>',
-        f'<p class="note">{_inline_md(INTRO.format(up=HIGHER, down=LOWER, ref=ref))} '
+        f'<p class="note">{inline_md(INTRO.format(up=HIGHER, down=LOWER, ref=ref))} '
         "Click a column header to sort.</p>",
         '<h2 id="measured">Measured here</h2>',
     ]

@@ -1,0 +1,293 @@
+"""The results tables of the documentation: which marked block of which file shows what
+(:data:`DOC_BLOCKS`), read from the committed files and rendered by the one table renderer,
+:mod:`cdr_bench.evaluate.report`.
+
+A block is the text between ``<!-- name:start -->`` and ``<!-- name:end -->``. Its inputs are
+the leaderboard's result files (``leaderboard/results/<entry>.json`` and
+``<entry>.multimodal-<scenario>.json``, the one committed copy of each evaluation), its
+submissions (display names, the paper row each entry reproduces, the agent folder), the
+paper's published tables (``leaderboard/published/``) and, for what is not an evaluation, the
+training, tuning and ``cdr-bench latency`` logs in the agent folders. Nothing is evaluated and
+no result file is written: :func:`render_docs` rewrites the blocks of the documentation files
+only. ``cdr-bench leaderboard build`` and ``cdr-bench leaderboard render-docs`` call it;
+``render-docs --check`` and ``tests/leaderboard/test_rendered_blocks.py`` fail when a block
+differs from what the files give.
+
+Training logs are read as JSON lines: the leaderboard never imports the trainers
+(``cdr_bench.rl``), and they never import it.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import os
+import re
+from collections.abc import Callable, Iterable, Sequence
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+from cdr_bench.errors import UserError
+from cdr_bench.evaluate import report
+from cdr_bench.evaluate.results import atomic_write_text, read_result
+from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published, load_published
+from cdr_bench.leaderboard.submission import Submission, load_submissions
+
+
+def result_path(results_dir: Path, name: str) -> Path:
+    return results_dir / f"{name}.json"
+
+
+def multimodal_path(results_dir: Path, name: str, scenario: str) -> Path:
+    return results_dir / f"{name}.multimodal-{scenario.replace('/', '_')}.json"
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise UserError(f"{path}: cannot read ({e})") from None
+
+
+def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        return [json.loads(x) for x in lines if x.strip()]
+    except (OSError, json.JSONDecodeError) as e:
+        raise UserError(f"{path}: cannot read ({e})") from None
+
+
+def _final(log: Path) -> dict[str, Any]:
+    finals = [r["final"] for r in _read_jsonl(log) if "final" in r]
+    if not finals:
+        raise UserError(f"{log}: no final line (an unfinished training log?)")
+    last: dict[str, Any] = finals[-1]
+    return last
+
+
+class Repo:
+    """A repository's leaderboard folder and agent folders, each file read at most once."""
+
+    def __init__(self, leaderboard_dir: str | os.PathLike[str]):
+        self.lb_dir = Path(leaderboard_dir)
+        self.root = self.lb_dir.resolve().parent
+        self.results_dir = self.lb_dir / "results"
+        self._results: dict[str, dict[str, Any]] = {}
+
+    @cached_property
+    def published(self) -> Published:
+        return load_published(self.lb_dir)
+
+    @cached_property
+    def submissions(self) -> dict[str, Submission]:
+        return {s.name: s for s in load_submissions(self.lb_dir, self.published.names)}
+
+    def submission(self, name: str) -> Submission:
+        if name not in self.submissions:
+            raise UserError(f"{self.lb_dir}/submissions/{name}.yaml: no such leaderboard entry")
+        return self.submissions[name]
+
+    def label(self, name: str) -> str:
+        return str(self.submission(name).display_name)
+
+    def result(self, name: str) -> dict[str, Any]:
+        if name not in self._results:
+            self.submission(name)
+            try:
+                self._results[name] = read_result(result_path(self.results_dir, name))
+            except ValueError as e:
+                raise UserError(
+                    f"{e}; run `cdr-bench leaderboard build --evaluate {name}`"
+                ) from None
+        return self._results[name]
+
+    def paper_rows(self, name: str) -> list[report.PaperRow]:
+        """The paper's rows the entry reproduces (its ``published_as``), one per density."""
+        row = self.submission(name).published_as
+        return [
+            report.PaperRow(
+                label=f"{r.row} — paper {r.table} (published)",
+                scenario=r.density,
+                episodes=r.episodes,
+                values={METRIC_OF_COLUMN[k]: v for k, v in r.values.items()},
+            )
+            for r in self.published.rows
+            if row is not None and r.row == row
+        ]
+
+    def multimodal(self, name: str) -> list[tuple[str, dict[str, Any]]]:
+        """The entry's ``cdr-bench multimodal`` results, in its submission's order."""
+        return [
+            (self.label(name), _read_json(multimodal_path(self.results_dir, name, sc)))
+            for sc in self.submission(name).multimodality
+        ]
+
+    def agent_dir(self, name: str) -> Path:
+        p = self.root / self.submission(name).agent
+        return p if p.is_dir() else p.parent
+
+    def latency(self, name: str) -> dict[str, Any]:
+        """``<agent folder>/analysis/latency.json`` (written by ``cdr-bench latency``)."""
+        data: dict[str, Any] = _read_json(self.agent_dir(name) / "analysis" / "latency.json")
+        return data
+
+
+# ----------------------------------------------------------------------------------------------
+# What each block shows
+
+
+def measured(
+    repo: Repo, entries: Iterable[str], scenarios: Sequence[str] | None = None, ci: bool = True
+) -> str:
+    """Entries' result files, each row followed by the paper's row it reproduces."""
+    return report.measured_table(
+        [(repo.label(n), repo.result(n), repo.paper_rows(n)) for n in entries], scenarios, ci
+    )
+
+
+def multimodality(repo: Repo, entries: Iterable[str]) -> str:
+    return report.multimodality_table([run for n in entries for run in repo.multimodal(n)])
+
+
+def latency(repo: Repo, entries: Iterable[str]) -> str:
+    return report.latency_table([(repo.label(n), repo.latency(n)) for n in entries])
+
+
+def training(repo: Repo, name: str, stages: str = "scenarios/curriculum") -> str:
+    log = repo.agent_dir(name) / "training_log.jsonl"
+    n_stages = len(list((repo.root / stages).glob("stage-*.yaml")))
+    return report.training_summary(
+        _final(log), log.relative_to(repo.root).as_posix(), n_stages or None
+    )
+
+
+def quick_evals(repo: Repo, logs: Iterable[tuple[str, str]], scenario: str) -> str:
+    """``(label, training log relative to the repository)`` of short runs."""
+    return report.quick_eval_table(
+        [(label, _final(repo.root / log)) for label, log in logs], scenario
+    )
+
+
+def tuning(repo: Repo, pattern: str = "agents/*/tuning/*.log.jsonl") -> str:
+    """Every tuning run: ``<run>.log.jsonl`` with its ``<run>.args.json`` beside it."""
+    runs = []
+    for log in sorted(repo.root.glob(pattern)):
+        run = log.name.removesuffix(".log.jsonl")
+        args = _read_json(log.with_name(f"{run}.args.json"))
+        runs.append((log.parent.parent.name, run, args, _read_jsonl(log)))
+    return report.tuning_table(runs)
+
+
+LEARNED = ("diffusion-ac", "ppo", "maskable-ppo", "td3", "safe-dqn-x", "rainbow")
+"""Leaderboard entries of the learned agents shipped in ``agents/``."""
+CLASSICAL = ("direct", "random", "mvp")
+ABLATIONS = (
+    "diffusion-ac-100k",
+    "diffusion-ac-no-diffusion",
+    "diffusion-ac-no-double-q",
+    "diffusion-ac-no-dpsc",
+    "diffusion-ac-no-value-guidance",
+)
+"""Diffusion-AC's Table-3 ablations, the complete method at the same budget first."""
+MULTIMODAL = ("diffusion-ac", "ppo")
+DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
+"""Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
+
+Block = Callable[[Repo], str]
+
+DOC_BLOCKS: dict[str, dict[str, Block]] = {
+    "README.md": {
+        "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
+        "reference-agents": lambda r: measured(r, CLASSICAL, ci=False),
+        "multimodality": lambda r: multimodality(r, MULTIMODAL),
+        "latency": lambda r: latency(r, LEARNED),
+    },
+    "agents/BASELINES.md": {
+        "tuning": tuning,
+        "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
+    },
+    "agents/diffusion_ac/README.md": {
+        "paper-suite": lambda r: measured(r, ["diffusion-ac"]),
+        "training": lambda r: training(r, "diffusion-ac"),
+        "ablations": lambda r: measured(r, ABLATIONS, ["high"]),
+        "design-runs": lambda r: quick_evals(
+            r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl") for n in DESIGN_RUNS], "high"
+        ),
+        "multimodality": lambda r: multimodality(r, ["diffusion-ac"]),
+        "latency": lambda r: report.latency_detail_table(r.latency("diffusion-ac")),
+    },
+}
+"""File (relative to the repository root) -> block name -> what renders it."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Blocks in files
+
+_BLOCK = re.compile(r"<!-- ([a-z0-9-]+):start -->\n(.*?)<!-- \1:end -->", re.S)
+
+
+def marked_blocks(text: str) -> dict[str, str]:
+    """Every ``<!-- name:start -->`` ... ``<!-- name:end -->`` block: name -> body."""
+    return {m.group(1): m.group(2) for m in _BLOCK.finditer(text)}
+
+
+def block_body(content: str) -> str:
+    """What goes between the markers: the content and a blank line (so that the end marker
+    never continues a Markdown table)."""
+    return content.rstrip("\n") + "\n\n"
+
+
+def replace_blocks(text: str, bodies: dict[str, str], where: str = "") -> str:
+    """``text`` with the body of each named block replaced; ValueError if a block is missing."""
+    missing = sorted(set(bodies) - set(marked_blocks(text)))
+    if missing:
+        raise ValueError(
+            f"{where}: no block "
+            + ", ".join(f"<!-- {n}:start --> ... <!-- {n}:end -->" for n in missing)
+        )
+
+    def sub(m: re.Match[str]) -> str:
+        name = m.group(1)
+        if name not in bodies:
+            return m.group(0)
+        return f"<!-- {name}:start -->\n{bodies[name]}<!-- {name}:end -->"
+
+    return _BLOCK.sub(sub, text)
+
+
+def rendered_docs(leaderboard_dir: str | os.PathLike[str]) -> dict[str, tuple[str, str]]:
+    """Each file of :data:`DOC_BLOCKS` present in the repository holding ``leaderboard_dir``:
+    path relative to the repository -> (text on disk, text with every block rendered now).
+    The README's other blocks (the env card and the scenario fields, generated from the code,
+    not from result files) are :mod:`cdr_bench.docs`'s."""
+    repo = Repo(leaderboard_dir)
+    out = {}
+    for rel, blocks in DOC_BLOCKS.items():
+        path = repo.root / rel
+        if not path.exists():
+            continue  # e.g. a leaderboard folder outside this repository
+        old = path.read_text(encoding="utf-8")
+        bodies = {name: block_body(fn(repo)) for name, fn in blocks.items()}
+        try:
+            out[rel] = (old, replace_blocks(old, bodies, rel))
+        except ValueError as e:
+            raise UserError(str(e)) from None
+    return out
+
+
+def render_docs(leaderboard_dir: str | os.PathLike[str], check: bool = False) -> list[str]:
+    """Rewrite every documentation block from the files (``check``: write nothing). Returns a
+    unified diff per file whose blocks differed from what the files give."""
+    root = Path(leaderboard_dir).resolve().parent
+    diffs = []
+    for rel, (old, new) in rendered_docs(leaderboard_dir).items():
+        if old == new:
+            continue
+        diff = difflib.unified_diff(
+            old.splitlines(), new.splitlines(), f"committed/{rel}", f"rendered/{rel}", lineterm=""
+        )
+        diffs.append("\n".join(diff))
+        if not check:
+            atomic_write_text(root / rel, new)
+    return diffs
