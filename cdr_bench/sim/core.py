@@ -150,7 +150,6 @@ class Simulator:
         self.route_unit = vec / np.maximum(self.route_length_km, 1e-9)[:, None]
         self.route_spacing_km = self.route_length_km / max(n, 1)
         self.traffic_speed_km_s = cfg.traffic.speed_kt * KM_PER_S_PER_KT
-        self._route_length_slot = np.repeat(self.route_length_km, self.C)  # (R * C,)
         self.X = len(cfg.aircraft)
         self.B = B = R * self.C + self.X
 
@@ -217,22 +216,11 @@ class Simulator:
         """Float parameters of the kernels (read-only; indices ``P_*`` of the kernels module)."""
 
         X = self.X
-        self._x_pos = np.array([a.position_km for a in cfg.aircraft], dtype=float).reshape(X, 2)
-        self._x_dir = np.array([exact_unit_vector(a.heading_deg) for a in cfg.aircraft]).reshape(
-            X, 2
-        )
-        self._x_speed = np.array([a.speed_kt * KM_PER_S_PER_KT for a in cfg.aircraft]).reshape(X)
-        self._x_level = np.array([a.level for a in cfg.aircraft], dtype=np.int64).reshape(X)
         li = cfg.learning_intruders
-        self._li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(
-            M - 1, 2
-        )
-        self._li_goal = np.array([cfg.airways[x.airway].end_km for x in li], float).reshape(
-            M - 1, 2
-        )
-        li_vec = self._li_goal - self._li_start
+        li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(M - 1, 2)
+        li_goal = np.array([cfg.airways[x.airway].end_km for x in li], float).reshape(M - 1, 2)
+        li_vec = li_goal - li_start
         li_len = np.sqrt(li_vec[:, 0] * li_vec[:, 0] + li_vec[:, 1] * li_vec[:, 1])
-        self._li_dir = li_vec / np.maximum(li_len, 1e-9)[:, None]
         own = np.zeros(9)
         if o.start is not None:
             assert o.goal_km is not None
@@ -242,10 +230,46 @@ class Simulator:
             own[k.O_SPEED] = o.start.speed_kt
             own[k.O_LEVEL] = o.start.level
             own[k.O_GOAL_X], own[k.O_GOAL_Y] = o.goal_km
-        self._own_fixed = own
         low, high = observation_bounds(cfg)
         self.obs_bounds = (low.astype(np.float64), high.astype(np.float64))
         """(low, high) of the observation Box, float64 (F,) each"""
+        self.constants = k.Constants(
+            fp=fp,
+            low=self.obs_bounds[0],
+            high=self.obs_bounds[1],
+            route_start=self.route_start_km,
+            route_unit=self.route_unit,
+            route_len=self.route_length_km,
+            route_len_slot=np.repeat(self.route_length_km, self.C),
+            spacing=self.route_spacing_km,
+            x_pos=np.array([a.position_km for a in cfg.aircraft], dtype=float).reshape(X, 2),
+            x_dir=np.array([exact_unit_vector(a.heading_deg) for a in cfg.aircraft]).reshape(X, 2),
+            x_speed=np.array([a.speed_kt * KM_PER_S_PER_KT for a in cfg.aircraft]).reshape(X),
+            x_level=np.array([a.level for a in cfg.aircraft], dtype=np.int64).reshape(X),
+            li_start=li_start,
+            li_goal=li_goal,
+            li_dir=li_vec / np.maximum(li_len, 1e-9)[:, None],
+            own_fixed=own,
+            per_route=self.per_route,
+            C=self.C,
+        )
+        """The scenario's constants as the kernels read them."""
+        self.state = k.State(
+            self.pos_km,
+            self.vel_km_s,
+            self.level,
+            self.active,
+            self.ac_dir,
+            self.ac_speed_kt,
+            self.ac_goal_km,
+            self.ac_outcome,
+            self.steps,
+            self.bg_arc_km,
+            self.route_last_arc_km,
+            self.route_spawn_count,
+            self.route_waiting,
+        )
+        """The state arrays (the same objects as the attributes above) as the kernels take them."""
         self.all_episodes = np.arange(E)
         self.all_episodes.flags.writeable = False
 
@@ -282,38 +306,7 @@ class Simulator:
         seed_arr = np.asarray([int(s) for s in np.asarray(seeds).reshape(-1)], dtype=np.uint64)
         if seed_arr.shape[0] != idx.shape[0]:
             raise ValueError(f"expected {idx.shape[0]} seeds, got {seed_arr.shape[0]}")
-        failed = k.reset_episodes(
-            idx,
-            seed_arr,
-            self.pos_km,
-            self.vel_km_s,
-            self.level,
-            self.active,
-            self.ac_dir,
-            self.ac_speed_kt,
-            self.ac_goal_km,
-            self.ac_outcome,
-            self.steps,
-            self.bg_arc_km,
-            self.route_last_arc_km,
-            self.route_spawn_count,
-            self.route_waiting,
-            self.route_start_km,
-            self.route_unit,
-            self.route_length_km,
-            self.route_spacing_km,
-            self.per_route,
-            self.C,
-            self._x_pos,
-            self._x_dir,
-            self._x_speed,
-            self._x_level,
-            self._li_start,
-            self._li_goal,
-            self._li_dir,
-            self._own_fixed,
-            self.params,
-        )
+        failed = k.reset_episodes(idx, seed_arr, self.state, self.constants)
         if failed >= 0:
             raise RuntimeError(
                 f"scenario {self.config.id!r}: no start with the required clearance found in 200 "
@@ -330,7 +323,7 @@ class Simulator:
         """
         E, M = self.E, self.M
         act = np.asarray(actions, dtype=np.int64).reshape(E, M)
-        low, high = self.obs_bounds
+        low = self.obs_bounds[0]
         terms = np.zeros((E, M, k.N_TERMS))
         flags = np.zeros((E, M, k.N_FLAGS), dtype=bool)
         outcome = np.zeros((E, M), dtype=np.int8)
@@ -340,40 +333,8 @@ class Simulator:
         done = np.zeros(E, dtype=bool)
         obs = np.empty((E, M, low.shape[0]), dtype=np.float32)
         masks = np.empty((E, M, N_ACTIONS), dtype=np.int8)
-        n_done = k.step_episodes(
-            act,
-            self.pos_km,
-            self.vel_km_s,
-            self.level,
-            self.active,
-            self.ac_dir,
-            self.ac_speed_kt,
-            self.ac_goal_km,
-            self.ac_outcome,
-            self.steps,
-            self.bg_arc_km,
-            self.route_last_arc_km,
-            self.route_spawn_count,
-            self.route_waiting,
-            self.route_start_km,
-            self.route_unit,
-            self._route_length_slot,
-            self.route_spacing_km,
-            self.C,
-            self.X,
-            self.params,
-            low,
-            high,
-            terms,
-            flags,
-            outcome,
-            min_sep,
-            events,
-            reward,
-            done,
-            obs,
-            masks,
-        )
+        out = k.StepOutput(terms, flags, outcome, min_sep, events, reward, done, obs, masks)
+        n_done = k.step_episodes(act, self.state, self.constants, out)
         return StepResult(terms, flags, outcome, min_sep, events, reward, done, n_done, obs, masks)
 
     def observe(
@@ -396,22 +357,8 @@ class Simulator:
             obs = np.zeros((self.E, self.M, low.shape[0]), dtype=np.float32)
         if masks is None:
             masks = np.zeros((self.E, self.M, N_ACTIONS), dtype=np.int8)
-        k.observe_episodes(
-            self.all_episodes if episodes is None else np.asarray(episodes, dtype=np.int64),
-            obs,
-            masks,
-            self.pos_km,
-            self.vel_km_s,
-            self.level,
-            self.active,
-            self.ac_dir,
-            self.ac_speed_kt,
-            self.ac_goal_km,
-            self.steps,
-            self.params,
-            low,
-            high,
-        )
+        episodes = self.all_episodes if episodes is None else np.asarray(episodes, dtype=np.int64)
+        k.observe_episodes(episodes, obs, masks, self.state, self.constants)
         return obs, masks
 
     # ------------------------------------------------------------------------------------------

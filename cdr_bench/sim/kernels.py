@@ -40,6 +40,7 @@ code after an edit.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -99,6 +100,79 @@ O_HAS, O_X, O_Y, O_DIR_X, O_DIR_Y, O_SPEED, O_LEVEL, O_GOAL_X, O_GOAL_Y = range(
 
 VEL_SCALE_KM_S = 1000.0 * KM_PER_S_PER_KT
 """Velocity normalisation of the observation: 1000 kt in km/s."""
+
+
+class State(NamedTuple):
+    """The state arrays of a batch of episodes (the table above); the kernels write them."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    level: np.ndarray
+    active: np.ndarray
+    ac_dir: np.ndarray
+    ac_speed: np.ndarray
+    ac_goal: np.ndarray
+    ac_outcome: np.ndarray
+    steps: np.ndarray
+    bg_arc: np.ndarray
+    route_last: np.ndarray
+    route_count: np.ndarray
+    route_waiting: np.ndarray
+
+
+class Constants(NamedTuple):
+    """What a scenario fixes, as the kernels read it."""
+
+    fp: np.ndarray
+    """float parameters, indices ``P_*``"""
+    low: np.ndarray
+    """(F,) lower observation bounds"""
+    high: np.ndarray
+    """(F,) upper observation bounds"""
+    route_start: np.ndarray
+    """(R, 2) airway entry points, km"""
+    route_unit: np.ndarray
+    """(R, 2) airway directions"""
+    route_len: np.ndarray
+    """(R,) airway lengths, km"""
+    route_len_slot: np.ndarray
+    """(R * C,) the length of each slot's airway, km"""
+    spacing: np.ndarray
+    """(R,) arc between successive aircraft of an airway, km"""
+    x_pos: np.ndarray
+    """(X, 2) explicit aircraft: start positions, km"""
+    x_dir: np.ndarray
+    """(X, 2) their heading vectors"""
+    x_speed: np.ndarray
+    """(X,) their speeds, km/s"""
+    x_level: np.ndarray
+    """(X,) their levels"""
+    li_start: np.ndarray
+    """(M - 1, 2) learning intruders: starts (their airway's entry), km"""
+    li_goal: np.ndarray
+    """(M - 1, 2) their goals (their airway's exit), km"""
+    li_dir: np.ndarray
+    """(M - 1, 2) their heading vectors"""
+    own_fixed: np.ndarray
+    """(9,) an explicit ownship start, indices ``O_*``"""
+    per_route: int
+    """aircraft per airway in steady state"""
+    C: int
+    """slots per airway"""
+
+
+class StepOutput(NamedTuple):
+    """The arrays one step writes (see :func:`step_episodes`)."""
+
+    terms: np.ndarray
+    flags: np.ndarray
+    outcome: np.ndarray
+    min_sep: np.ndarray
+    events: np.ndarray
+    reward: np.ndarray
+    done: np.ndarray
+    obs: np.ndarray
+    masks: np.ndarray
 
 
 # ----------------------------------------------------------------------------------------------
@@ -171,105 +245,68 @@ def _below(state: np.ndarray, n: int) -> int:
 
 
 @njit(cache=True)
-def _populate_traffic(
-    e,
-    rs,
-    pos,
-    vel,
-    level,
-    active,
-    bg_arc,
-    route_last,
-    route_count,
-    route_waiting,
-    route_start,
-    route_unit,
-    route_len,
-    spacing,
-    per_route,
-    C,
-    x_pos,
-    x_dir,
-    x_speed,
-    x_level,
-    fp,
-):
+def _populate_traffic(e, rs, s, c):
     """Steady state: each airway holds ``per_route`` aircraft one spacing apart, random phase;
     levels cyclic in spawn order. Then the explicitly placed aircraft."""
-    R = route_start.shape[0]
-    B = R * C + x_pos.shape[0]
+    R = c.route_start.shape[0]
+    B = R * c.C + c.x_pos.shape[0]
     for b in range(B):
-        active[e, b] = False
+        s.active[e, b] = False
     for r in range(R):
-        route_last[e, r] = _uniform(rs, 0.0, 1.0) * spacing[r]  # arc of the newest aircraft
+        s.route_last[e, r] = _uniform(rs, 0.0, 1.0) * c.spacing[r]  # arc of the newest aircraft
     for r in range(R):
-        route_count[e, r] = _below(rs, N_LEVELS) + 1  # the newest aircraft's level + 1
-    speed = fp[P_TRAFFIC_SPEED]
+        s.route_count[e, r] = _below(rs, N_LEVELS) + 1  # the newest aircraft's level + 1
+    speed = c.fp[P_TRAFFIC_SPEED]
     for r in range(R):
-        newest_level = route_count[e, r] - 1
-        route_waiting[e, r] = False
-        for j in range(C):
-            slot = r * C + j
-            bg_arc[e, slot] = 0.0
-            if j >= per_route:
+        newest_level = s.route_count[e, r] - 1
+        s.route_waiting[e, r] = False
+        for j in range(c.C):
+            slot = r * c.C + j
+            s.bg_arc[e, slot] = 0.0
+            if j >= c.per_route:
                 continue
-            arc = route_last[e, r] + j * spacing[r]  # older aircraft spawned earlier
-            bg_arc[e, slot] = arc
-            pos[e, slot, 0] = route_start[r, 0] + arc * route_unit[r, 0]
-            pos[e, slot, 1] = route_start[r, 1] + arc * route_unit[r, 1]
-            vel[e, slot, 0] = route_unit[r, 0] * speed
-            vel[e, slot, 1] = route_unit[r, 1] * speed
-            level[e, slot] = (newest_level - j) % N_LEVELS
-            active[e, slot] = arc < route_len[r]
-    for i in range(x_pos.shape[0]):
-        b = R * C + i
-        pos[e, b, 0] = x_pos[i, 0]
-        pos[e, b, 1] = x_pos[i, 1]
-        vel[e, b, 0] = x_dir[i, 0] * x_speed[i]
-        vel[e, b, 1] = x_dir[i, 1] * x_speed[i]
-        level[e, b] = x_level[i]
-        active[e, b] = True
+            arc = s.route_last[e, r] + j * c.spacing[r]  # older aircraft spawned earlier
+            s.bg_arc[e, slot] = arc
+            s.pos[e, slot, 0] = c.route_start[r, 0] + arc * c.route_unit[r, 0]
+            s.pos[e, slot, 1] = c.route_start[r, 1] + arc * c.route_unit[r, 1]
+            s.vel[e, slot, 0] = c.route_unit[r, 0] * speed
+            s.vel[e, slot, 1] = c.route_unit[r, 1] * speed
+            s.level[e, slot] = (newest_level - j) % N_LEVELS
+            s.active[e, slot] = arc < c.route_len[r]
+    for i in range(c.x_pos.shape[0]):
+        b = R * c.C + i
+        s.pos[e, b, 0] = c.x_pos[i, 0]
+        s.pos[e, b, 1] = c.x_pos[i, 1]
+        s.vel[e, b, 0] = c.x_dir[i, 0] * c.x_speed[i]
+        s.vel[e, b, 1] = c.x_dir[i, 1] * c.x_speed[i]
+        s.level[e, b] = c.x_level[i]
+        s.active[e, b] = True
 
 
 @njit(cache=True)
-def _clear_of_traffic(e, x, y, clearance, lv, pos, level, active, B):
+def _clear_of_traffic(e, x, y, clearance, lv, s, B):
     """No background aircraft (at level ``lv``, or any level when ``lv < 0``) closer than
     ``clearance`` km to (x, y)."""
     for b in range(B):
-        if not active[e, b] or (lv >= 0 and level[e, b] != lv):
+        if not s.active[e, b] or (lv >= 0 and s.level[e, b] != lv):
             continue
-        dx = pos[e, b, 0] - x
-        dy = pos[e, b, 1] - y
+        dx = s.pos[e, b, 0] - x
+        dy = s.pos[e, b, 1] - y
         if math.sqrt(dx * dx + dy * dy) < clearance:
             return False
     return True
 
 
 @njit(cache=True)
-def _place_controlled(
-    e,
-    rs,
-    pos,
-    level,
-    active,
-    ac_dir,
-    ac_speed,
-    ac_goal,
-    B,
-    li_start,
-    li_goal,
-    li_dir,
-    own_fixed,
-    fp,
-):
+def _place_controlled(e, rs, s, c, B):
     """Learning intruders at the entry of their airway on a level clear of traffic, then the
     ownship (explicit, or on the boundary clear of traffic heading for a random goal).
     False when no clear start was found (the caller redraws the traffic)."""
-    clearance = fp[P_START_CLEARANCE]
-    M = ac_dir.shape[1]
+    clearance = c.fp[P_START_CLEARANCE]
+    M = s.ac_dir.shape[1]
     perm = np.empty(N_LEVELS, dtype=np.int64)
     for k in range(1, M):
-        sx, sy = li_start[k - 1, 0], li_start[k - 1, 1]
+        sx, sy = c.li_start[k - 1, 0], c.li_start[k - 1, 1]
         for i in range(N_LEVELS):
             perm[i] = i
         for i in range(N_LEVELS - 1, 0, -1):  # Fisher-Yates
@@ -277,44 +314,44 @@ def _place_controlled(
             perm[i], perm[j] = perm[j], perm[i]
         near_placed = False
         for p in range(1, k):
-            dx = sx - pos[e, B + p, 0]
-            dy = sy - pos[e, B + p, 1]
+            dx = sx - s.pos[e, B + p, 0]
+            dy = sy - s.pos[e, B + p, 1]
             if math.sqrt(dx * dx + dy * dy) < clearance:
                 near_placed = True
         found = -1
         if not near_placed:
             for i in range(N_LEVELS):
-                if _clear_of_traffic(e, sx, sy, clearance, perm[i], pos, level, active, B):
+                if _clear_of_traffic(e, sx, sy, clearance, perm[i], s, B):
                     found = perm[i]
                     break
         if found < 0:
             return False
-        pos[e, B + k, 0], pos[e, B + k, 1] = sx, sy
-        ac_dir[e, k, 0], ac_dir[e, k, 1] = li_dir[k - 1, 0], li_dir[k - 1, 1]
-        ac_speed[e, k] = fp[P_START_SPEED]
-        level[e, B + k] = found
-        ac_goal[e, k, 0], ac_goal[e, k, 1] = li_goal[k - 1, 0], li_goal[k - 1, 1]
+        s.pos[e, B + k, 0], s.pos[e, B + k, 1] = sx, sy
+        s.ac_dir[e, k, 0], s.ac_dir[e, k, 1] = c.li_dir[k - 1, 0], c.li_dir[k - 1, 1]
+        s.ac_speed[e, k] = c.fp[P_START_SPEED]
+        s.level[e, B + k] = found
+        s.ac_goal[e, k, 0], s.ac_goal[e, k, 1] = c.li_goal[k - 1, 0], c.li_goal[k - 1, 1]
 
-    if own_fixed[O_HAS] != 0.0:
-        pos[e, B, 0], pos[e, B, 1] = own_fixed[O_X], own_fixed[O_Y]
-        ac_dir[e, 0, 0], ac_dir[e, 0, 1] = own_fixed[O_DIR_X], own_fixed[O_DIR_Y]
-        ac_speed[e, 0] = own_fixed[O_SPEED]
-        level[e, B] = int(own_fixed[O_LEVEL])
-        ac_goal[e, 0, 0], ac_goal[e, 0, 1] = own_fixed[O_GOAL_X], own_fixed[O_GOAL_Y]
+    if c.own_fixed[O_HAS] != 0.0:
+        s.pos[e, B, 0], s.pos[e, B, 1] = c.own_fixed[O_X], c.own_fixed[O_Y]
+        s.ac_dir[e, 0, 0], s.ac_dir[e, 0, 1] = c.own_fixed[O_DIR_X], c.own_fixed[O_DIR_Y]
+        s.ac_speed[e, 0] = c.own_fixed[O_SPEED]
+        s.level[e, B] = int(c.own_fixed[O_LEVEL])
+        s.ac_goal[e, 0, 0], s.ac_goal[e, 0, 1] = c.own_fixed[O_GOAL_X], c.own_fixed[O_GOAL_Y]
         return True
 
-    size = fp[P_SIZE]
-    margin = fp[P_GOAL_MARGIN]
+    size = c.fp[P_SIZE]
+    margin = c.fp[P_GOAL_MARGIN]
     gx = _uniform(rs, margin, size - margin)
     gy = _uniform(rs, margin, size - margin)
     own_level = _below(rs, N_LEVELS)
     n_candidates = 64
     perims = np.empty(n_candidates)
-    for c in range(n_candidates):
-        perims[c] = _uniform(rs, 0.0, 4.0 * size)
-    for c in range(n_candidates):
-        side = min(int(perims[c] // size), 3)
-        u = perims[c] - side * size
+    for q in range(n_candidates):
+        perims[q] = _uniform(rs, 0.0, 4.0 * size)
+    for q in range(n_candidates):
+        side = min(int(perims[q] // size), 3)
+        u = perims[q] - side * size
         if side == 0:
             x, y = u, 0.0
         elif side == 1:
@@ -323,126 +360,58 @@ def _place_controlled(
             x, y = size - u, size
         else:
             x, y = 0.0, size - u
-        if not _clear_of_traffic(e, x, y, clearance, -1, pos, level, active, B):
+        if not _clear_of_traffic(e, x, y, clearance, -1, s, B):
             continue
         ok = True
         for p in range(1, M):
-            dx = x - pos[e, B + p, 0]
-            dy = y - pos[e, B + p, 1]
+            dx = x - s.pos[e, B + p, 0]
+            dy = y - s.pos[e, B + p, 1]
             if math.sqrt(dx * dx + dy * dy) < clearance:
                 ok = False
         if not ok:
             continue
-        pos[e, B, 0], pos[e, B, 1] = x, y
+        s.pos[e, B, 0], s.pos[e, B, 1] = x, y
         dx, dy = gx - x, gy - y
         norm = math.sqrt(dx * dx + dy * dy)
         if norm > 0.0:
-            ac_dir[e, 0, 0], ac_dir[e, 0, 1] = dx / norm, dy / norm
+            s.ac_dir[e, 0, 0], s.ac_dir[e, 0, 1] = dx / norm, dy / norm
         else:
-            ac_dir[e, 0, 0], ac_dir[e, 0, 1] = 0.0, 1.0
-        ac_speed[e, 0] = fp[P_START_SPEED]
-        level[e, B] = own_level
-        ac_goal[e, 0, 0], ac_goal[e, 0, 1] = gx, gy
+            s.ac_dir[e, 0, 0], s.ac_dir[e, 0, 1] = 0.0, 1.0
+        s.ac_speed[e, 0] = c.fp[P_START_SPEED]
+        s.level[e, B] = own_level
+        s.ac_goal[e, 0, 0], s.ac_goal[e, 0, 1] = gx, gy
         return True
     return False
 
 
 @njit(cache=True)
-def reset_episodes(
-    episodes,
-    seeds,
-    pos,
-    vel,
-    level,
-    active,
-    ac_dir,
-    ac_speed,
-    ac_goal,
-    ac_outcome,
-    steps,
-    bg_arc,
-    route_last,
-    route_count,
-    route_waiting,
-    route_start,
-    route_unit,
-    route_len,
-    spacing,
-    per_route,
-    C,
-    x_pos,
-    x_dir,
-    x_speed,
-    x_level,
-    li_start,
-    li_goal,
-    li_dir,
-    own_fixed,
-    fp,
-):
+def reset_episodes(episodes, seeds, s, c):
     """Start episode ``episodes[i]`` from ``seeds[i]`` (uint64) for every i.
 
     Returns -1, or the position ``i`` of the first episode for which no start with the
     required clearance was found in 200 draws of the traffic.
     """
-    M = ac_dir.shape[1]
-    B = pos.shape[1] - M
+    M = s.ac_dir.shape[1]
+    B = s.pos.shape[1] - M
     rs = np.empty(1, dtype=np.uint64)
     for i in range(episodes.shape[0]):
         e = episodes[i]
         rs[0] = seeds[i]
         placed = False
         for _attempt in range(200):
-            _populate_traffic(
-                e,
-                rs,
-                pos,
-                vel,
-                level,
-                active,
-                bg_arc,
-                route_last,
-                route_count,
-                route_waiting,
-                route_start,
-                route_unit,
-                route_len,
-                spacing,
-                per_route,
-                C,
-                x_pos,
-                x_dir,
-                x_speed,
-                x_level,
-                fp,
-            )
-            if _place_controlled(
-                e,
-                rs,
-                pos,
-                level,
-                active,
-                ac_dir,
-                ac_speed,
-                ac_goal,
-                B,
-                li_start,
-                li_goal,
-                li_dir,
-                own_fixed,
-                fp,
-            ):
+            _populate_traffic(e, rs, s, c)
+            if _place_controlled(e, rs, s, c, B):
                 placed = True
                 break
         if not placed:
             return i
-        steps[e] = 0
+        s.steps[e] = 0
         for m in range(M):
-            ac_outcome[e, m] = RUNNING
-            active[e, B + m] = True
-            v = ac_speed[e, m] * KM_PER_S_PER_KT
-            vel[e, B + m, 0] = ac_dir[e, m, 0] * v
-            vel[e, B + m, 1] = ac_dir[e, m, 1] * v
+            s.ac_outcome[e, m] = RUNNING
+            s.active[e, B + m] = True
+            v = s.ac_speed[e, m] * KM_PER_S_PER_KT
+            s.vel[e, B + m, 0] = s.ac_dir[e, m, 0] * v
+            s.vel[e, B + m, 1] = s.ac_dir[e, m, 1] * v
     return -1
 
 
@@ -451,107 +420,60 @@ def reset_episodes(
 
 
 @njit(cache=True)
-def _spawn_traffic(
-    e,
-    pos,
-    vel,
-    level,
-    active,
-    bg_arc,
-    route_last,
-    route_count,
-    route_waiting,
-    route_start,
-    route_unit,
-    spacing,
-    C,
-    n_explicit,
-    acting,
-    fp,
-):
+def _spawn_traffic(e, s, c, acting):
     """A due airway spawn enters unless a controlled aircraft that flew this step is within the
     spawn clearance at the spawn level (it then waits, and enters at the airway start later)."""
-    R = route_start.shape[0]
+    R = c.route_start.shape[0]
     M = acting.shape[0]
-    B = R * C + n_explicit
-    step_km = fp[P_TRAFFIC_STEP]
-    speed = fp[P_TRAFFIC_SPEED]
-    clearance = fp[P_SPAWN_CLEARANCE]
+    B = R * c.C + c.x_pos.shape[0]
+    step_km = c.fp[P_TRAFFIC_STEP]
+    speed = c.fp[P_TRAFFIC_SPEED]
+    clearance = c.fp[P_SPAWN_CLEARANCE]
     for r in range(R):
-        route_last[e, r] += step_km
-        if route_last[e, r] < spacing[r]:
+        s.route_last[e, r] += step_km
+        if s.route_last[e, r] < c.spacing[r]:
             continue
-        arc = 0.0 if route_waiting[e, r] else route_last[e, r] - spacing[r]
-        lv = route_count[e, r] % N_LEVELS
-        x = route_start[r, 0] + arc * route_unit[r, 0]
-        y = route_start[r, 1] + arc * route_unit[r, 1]
+        arc = 0.0 if s.route_waiting[e, r] else s.route_last[e, r] - c.spacing[r]
+        lv = s.route_count[e, r] % N_LEVELS
+        x = c.route_start[r, 0] + arc * c.route_unit[r, 0]
+        y = c.route_start[r, 1] + arc * c.route_unit[r, 1]
         blocked = False
         for m in range(M):
-            if acting[m] and level[e, B + m] == lv:
-                dx = x - pos[e, B + m, 0]
-                dy = y - pos[e, B + m, 1]
+            if acting[m] and s.level[e, B + m] == lv:
+                dx = x - s.pos[e, B + m, 0]
+                dy = y - s.pos[e, B + m, 1]
                 if math.sqrt(dx * dx + dy * dy) < clearance:
                     blocked = True
-        route_waiting[e, r] = blocked
+        s.route_waiting[e, r] = blocked
         if blocked:
             continue
         slot = -1
-        for j in range(C):
-            if not active[e, r * C + j]:
-                slot = r * C + j
+        for j in range(c.C):
+            if not s.active[e, r * c.C + j]:
+                slot = r * c.C + j
                 break
         if slot < 0:  # pragma: no cover - capacity per_route + 2 suffices
             raise RuntimeError("airway slot capacity exceeded")
-        active[e, slot] = True
-        bg_arc[e, slot] = arc
-        pos[e, slot, 0], pos[e, slot, 1] = x, y
-        vel[e, slot, 0] = route_unit[r, 0] * speed
-        vel[e, slot, 1] = route_unit[r, 1] * speed
-        level[e, slot] = lv
-        route_last[e, r] = arc
-        route_count[e, r] += 1
+        s.active[e, slot] = True
+        s.bg_arc[e, slot] = arc
+        s.pos[e, slot, 0], s.pos[e, slot, 1] = x, y
+        s.vel[e, slot, 0] = c.route_unit[r, 0] * speed
+        s.vel[e, slot, 1] = c.route_unit[r, 1] * speed
+        s.level[e, slot] = lv
+        s.route_last[e, r] = arc
+        s.route_count[e, r] += 1
 
 
 @njit(cache=True)
-def step_episodes(
-    actions,
-    pos,
-    vel,
-    level,
-    active,
-    ac_dir,
-    ac_speed,
-    ac_goal,
-    ac_outcome,
-    steps,
-    bg_arc,
-    route_last,
-    route_count,
-    route_waiting,
-    route_start,
-    route_unit,
-    route_len_slot,
-    spacing,
-    C,
-    n_explicit,
-    fp,
-    low,
-    high,
-    terms,
-    flags,
-    outcome,
-    min_sep,
-    events,
-    reward,
-    done,
-    obs,
-    masks,
-):
+def step_episodes(actions, s, c, o):
     """Advance every episode by one step (docs/model.md §3-§6).
 
     Args:
         actions: (E, M) action indices 0..26 (validated by the caller); aircraft that are not
             flying hold.
+        s, c: the state (written) and the scenario's constants.
+        o: the outputs, written:
+
         terms: (E, M, 7) out, the named reward terms of the step.
         flags: (E, M, 6) out, bool: acting, invalid action, outside, reached goal, terminated,
             truncated.
@@ -561,57 +483,39 @@ def step_episodes(
         reward: (E, M) out, zero on entry: the sum of the terms.
         done: (E,) out, zero on entry: the episode's last aircraft finished this step.
         obs, masks: (E, M, F) float32 and (E, M, 27) int8 out: observations and action masks
-            after the step (:func:`observe_episodes`; low, high: the observation bounds).
+            after the step (:func:`observe_episodes`).
 
     Returns:
         The number of episodes done this step.
     """
-    E, M = ac_dir.shape[0], ac_dir.shape[1]
-    N = pos.shape[1]
+    E, M = s.ac_dir.shape[0], s.ac_dir.shape[1]
+    N = s.pos.shape[1]
     B = N - M
-    dt = fp[P_DT]
-    los_km, nmac_km = fp[P_LOS], fp[P_NMAC]
-    size = fp[P_SIZE]
-    turn_c, turn_s = fp[P_TURN_COS], fp[P_TURN_SIN]
-    path_w = -fp[P_W_PATH] / (size * size)
-    max_steps = int(fp[P_MAX_STEPS])
+    dt = c.fp[P_DT]
+    los_km, nmac_km = c.fp[P_LOS], c.fp[P_NMAC]
+    size = c.fp[P_SIZE]
+    turn_c, turn_s = c.fp[P_TURN_COS], c.fp[P_TURN_SIN]
+    path_w = -c.fp[P_W_PATH] / (size * size)
+    max_steps = int(c.fp[P_MAX_STEPS])
     new_level = np.empty(M, dtype=np.int64)
     acting = np.empty(M, dtype=np.bool_)
     n_los = np.empty(M, dtype=np.int64)
     n_nmac = np.empty(M, dtype=np.int64)
     occ = np.empty(M, dtype=np.int64)
-    row = np.zeros(obs.shape[2])
-    best_d = np.empty(max((obs.shape[2] - 12) // 10, 1))
+    row = np.zeros(o.obs.shape[2])
+    best_d = np.empty(max((o.obs.shape[2] - 12) // 10, 1))
     best_n = np.empty(best_d.shape[0], dtype=np.int64)
     n_done = 0
     for e in range(E):
         live = False
         for m in range(M):
-            acting[m] = active[e, B + m]
+            acting[m] = s.active[e, B + m]
             live |= acting[m]
-            flags[e, m, F_ACTING] = acting[m]
-            min_sep[e, m] = np.inf
-            new_level[m] = level[e, B + m]
+            o.flags[e, m, F_ACTING] = acting[m]
+            o.min_sep[e, m] = np.inf
+            new_level[m] = s.level[e, B + m]
         if not live:
-            _observe_episode(
-                e,
-                obs,
-                masks,
-                pos,
-                vel,
-                level,
-                active,
-                ac_dir,
-                ac_speed,
-                ac_goal,
-                steps,
-                fp,
-                low,
-                high,
-                row,
-                best_d,
-                best_n,
-            )
+            _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n)
             continue
 
         # 1. Apply the actions at the start of the step: turn, clipped speed, target level.
@@ -622,28 +526,28 @@ def step_episodes(
             a_psi = a // 9 - 1
             a_v = (a // 3) % 3 - 1
             a_h = a % 3 - 1
-            target = level[e, B + m] + a_h
+            target = s.level[e, B + m] + a_h
             if target < 0 or target >= N_LEVELS:
-                flags[e, m, F_INVALID] = True  # masked: the level change is not executed
+                o.flags[e, m, F_INVALID] = True  # masked: the level change is not executed
             else:
                 new_level[m] = target
             if a_psi != 0:  # rotate the heading vector clockwise by a_psi heading steps
-                s = turn_s * a_psi
-                ux, uy = ac_dir[e, m, 0], ac_dir[e, m, 1]
-                rx = ux * turn_c + uy * s
-                ry = uy * turn_c - ux * s
+                sin_turn = turn_s * a_psi
+                ux, uy = s.ac_dir[e, m, 0], s.ac_dir[e, m, 1]
+                rx = ux * turn_c + uy * sin_turn
+                ry = uy * turn_c - ux * sin_turn
                 norm = math.sqrt(rx * rx + ry * ry)
-                ac_dir[e, m, 0], ac_dir[e, m, 1] = rx / norm, ry / norm
-            sp = ac_speed[e, m] + a_v * fp[P_SPEED_STEP]
-            ac_speed[e, m] = min(max(sp, fp[P_MIN_SPEED]), fp[P_MAX_SPEED])
-            v = ac_speed[e, m] * KM_PER_S_PER_KT
-            vel[e, B + m, 0] = ac_dir[e, m, 0] * v
-            vel[e, B + m, 1] = ac_dir[e, m, 1] * v
+                s.ac_dir[e, m, 0], s.ac_dir[e, m, 1] = rx / norm, ry / norm
+            sp = s.ac_speed[e, m] + a_v * c.fp[P_SPEED_STEP]
+            s.ac_speed[e, m] = min(max(sp, c.fp[P_MIN_SPEED]), c.fp[P_MAX_SPEED])
+            v = s.ac_speed[e, m] * KM_PER_S_PER_KT
+            s.vel[e, B + m, 0] = s.ac_dir[e, m, 0] * v
+            s.vel[e, B + m, 1] = s.ac_dir[e, m, 1] * v
 
         # 2. Swept separation over [0, dt] against every aircraft in the sky; a level change
         #    occupies the old and the new level for the step.
         for m in range(M):
-            occ[m] = ((1 << level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
+            occ[m] = ((1 << s.level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
         for m in range(M):
             n_los[m] = 0
             n_nmac[m] = 0
@@ -651,155 +555,124 @@ def step_episodes(
                 continue
             i = B + m
             occ_m = occ[m]
-            px, py = pos[e, i, 0], pos[e, i, 1]
-            vx, vy = vel[e, i, 0], vel[e, i, 1]
+            px, py = s.pos[e, i, 0], s.pos[e, i, 1]
+            vx, vy = s.vel[e, i, 0], s.vel[e, i, 1]
             best = np.inf  # locals, not array elements: kept in registers
             n_l = 0
             n_n = 0
             for n in range(N):
-                if n == i or not active[e, n]:
+                if n == i or not s.active[e, n]:
                     continue
-                occ_n = (1 << level[e, n]) if n < B else occ[n - B]
+                occ_n = (1 << s.level[e, n]) if n < B else occ[n - B]
                 if occ_m & occ_n == 0:
                     continue
                 d, _ = closest_approach(
-                    pos[e, n, 0] - px, pos[e, n, 1] - py, vel[e, n, 0] - vx, vel[e, n, 1] - vy, dt
+                    s.pos[e, n, 0] - px,
+                    s.pos[e, n, 1] - py,
+                    s.vel[e, n, 0] - vx,
+                    s.vel[e, n, 1] - vy,
+                    dt,
                 )
                 if d < best:
                     best = d
                 if d < los_km:  # an NMAC (d < nmac_km < los_km) is also a LoS
-                    events[0, e, m, n] = True
+                    o.events[0, e, m, n] = True
                     n_l += 1
                     if d < nmac_km:
-                        events[1, e, m, n] = True
+                        o.events[1, e, m, n] = True
                         n_n += 1
-            min_sep[e, m] = best
+            o.min_sep[e, m] = best
             n_los[m] = n_l
             n_nmac[m] = n_n
 
         # 4. Move the background (every slot: one not in the sky is placed again when it
         #    spawns); airway aircraft leave at the end of their airway, explicit ones at the
         #    sector edge.
-        n_airway = bg_arc.shape[1]
-        step_km = fp[P_TRAFFIC_STEP]
+        n_airway = s.bg_arc.shape[1]
+        step_km = c.fp[P_TRAFFIC_STEP]
         for n in range(B):
-            x = pos[e, n, 0] + vel[e, n, 0] * dt
-            y = pos[e, n, 1] + vel[e, n, 1] * dt
-            pos[e, n, 0] = x
-            pos[e, n, 1] = y
+            x = s.pos[e, n, 0] + s.vel[e, n, 0] * dt
+            y = s.pos[e, n, 1] + s.vel[e, n, 1] * dt
+            s.pos[e, n, 0] = x
+            s.pos[e, n, 1] = y
             if n < n_airway:
-                arc = bg_arc[e, n] + step_km
-                bg_arc[e, n] = arc
-                if arc >= route_len_slot[n]:
-                    active[e, n] = False
+                arc = s.bg_arc[e, n] + step_km
+                s.bg_arc[e, n] = arc
+                if arc >= c.route_len_slot[n]:
+                    s.active[e, n] = False
             elif x < 0.0 or x > size or y < 0.0 or y > size:
-                active[e, n] = False
+                s.active[e, n] = False
 
         # 3. Swept goal test: the goal is a fixed point.
         for m in range(M):
             if acting[m]:
                 i = B + m
                 d, _ = closest_approach(
-                    ac_goal[e, m, 0] - pos[e, i, 0],
-                    ac_goal[e, m, 1] - pos[e, i, 1],
-                    -vel[e, i, 0],
-                    -vel[e, i, 1],
+                    s.ac_goal[e, m, 0] - s.pos[e, i, 0],
+                    s.ac_goal[e, m, 1] - s.pos[e, i, 1],
+                    -s.vel[e, i, 0],
+                    -s.vel[e, i, 1],
                     dt,
                 )
-                flags[e, m, F_REACHED] = d < fp[P_GOAL_RADIUS]
+                o.flags[e, m, F_REACHED] = d < c.fp[P_GOAL_RADIUS]
 
         # 4. Move the controlled aircraft (a controlled aircraft that has left has zero
         #    velocity); due airway spawns enter.
         for n in range(B, N):
-            pos[e, n, 0] += vel[e, n, 0] * dt
-            pos[e, n, 1] += vel[e, n, 1] * dt
+            s.pos[e, n, 0] += s.vel[e, n, 0] * dt
+            s.pos[e, n, 1] += s.vel[e, n, 1] * dt
         for m in range(M):
-            level[e, B + m] = new_level[m]
-        steps[e] += 1
-        _spawn_traffic(
-            e,
-            pos,
-            vel,
-            level,
-            active,
-            bg_arc,
-            route_last,
-            route_count,
-            route_waiting,
-            route_start,
-            route_unit,
-            spacing,
-            C,
-            n_explicit,
-            acting,
-            fp,
-        )
+            s.level[e, B + m] = new_level[m]
+        s.steps[e] += 1
+        _spawn_traffic(e, s, c, acting)
 
         # 5. Outcomes (priority nmac > los > boundary > success) and named rewards.
         for m in range(M):
             if not acting[m]:
                 continue
             i = B + m
-            x, y = pos[e, i, 0], pos[e, i, 1]
+            x, y = s.pos[e, i, 0], s.pos[e, i, 1]
             out = x < 0.0 or x > size or y < 0.0 or y > size
-            code = SUCCESS if flags[e, m, F_REACHED] else RUNNING
-            if out and fp[P_BOUNDARY_TERMINATES] != 0.0:
+            code = SUCCESS if o.flags[e, m, F_REACHED] else RUNNING
+            if out and c.fp[P_BOUNDARY_TERMINATES] != 0.0:
                 code = BOUNDARY
-            if n_los[m] > 0 and fp[P_LOS_TERMINATES] != 0.0:
+            if n_los[m] > 0 and c.fp[P_LOS_TERMINATES] != 0.0:
                 code = LOS
             if n_nmac[m] > 0:
                 code = NMAC
             term = code != RUNNING
-            trunc = not term and steps[e] >= max_steps
+            trunc = not term and s.steps[e] >= max_steps
             if trunc:
                 code = TIMEOUT
-            gx = ac_goal[e, m, 0] - x
-            gy = ac_goal[e, m, 1] - y
-            terms[e, m, R_GOAL] = fp[P_W_GOAL] if code == SUCCESS else 0.0
-            terms[e, m, R_PATH] = path_w * (gx * gx + gy * gy)
-            terms[e, m, R_BOUNDARY] = -fp[P_W_BOUNDARY] if out else 0.0
-            terms[e, m, R_STEP] = -fp[P_W_STEP]
-            terms[e, m, R_TIMEOUT] = -fp[P_W_TIMEOUT] if trunc else 0.0
-            terms[e, m, R_LOS] = -fp[P_W_LOS] * (n_los[m] - n_nmac[m])
-            terms[e, m, R_NMAC] = -fp[P_W_NMAC] * n_nmac[m]
-            flags[e, m, F_OUTSIDE] = out
-            flags[e, m, F_TERMINATED] = term
-            flags[e, m, F_TRUNCATED] = trunc
-            outcome[e, m] = code
+            gx = s.ac_goal[e, m, 0] - x
+            gy = s.ac_goal[e, m, 1] - y
+            o.terms[e, m, R_GOAL] = c.fp[P_W_GOAL] if code == SUCCESS else 0.0
+            o.terms[e, m, R_PATH] = path_w * (gx * gx + gy * gy)
+            o.terms[e, m, R_BOUNDARY] = -c.fp[P_W_BOUNDARY] if out else 0.0
+            o.terms[e, m, R_STEP] = -c.fp[P_W_STEP]
+            o.terms[e, m, R_TIMEOUT] = -c.fp[P_W_TIMEOUT] if trunc else 0.0
+            o.terms[e, m, R_LOS] = -c.fp[P_W_LOS] * (n_los[m] - n_nmac[m])
+            o.terms[e, m, R_NMAC] = -c.fp[P_W_NMAC] * n_nmac[m]
+            o.flags[e, m, F_OUTSIDE] = out
+            o.flags[e, m, F_TERMINATED] = term
+            o.flags[e, m, F_TRUNCATED] = trunc
+            o.outcome[e, m] = code
             if term or trunc:
-                ac_outcome[e, m] = code
-                active[e, i] = False
-                vel[e, i, 0] = 0.0
-                vel[e, i, 1] = 0.0
+                s.ac_outcome[e, m] = code
+                s.active[e, i] = False
+                s.vel[e, i, 0] = 0.0
+                s.vel[e, i, 1] = 0.0
             total = 0.0
             for t in range(N_TERMS):
-                total += terms[e, m, t]
-            reward[e, m] = total
+                total += o.terms[e, m, t]
+            o.reward[e, m] = total
         still = False
         for m in range(M):
-            still |= active[e, B + m]
+            still |= s.active[e, B + m]
         if not still:
-            done[e] = True
+            o.done[e] = True
             n_done += 1
-        _observe_episode(
-            e,
-            obs,
-            masks,
-            pos,
-            vel,
-            level,
-            active,
-            ac_dir,
-            ac_speed,
-            ac_goal,
-            steps,
-            fp,
-            low,
-            high,
-            row,
-            best_d,
-            best_n,
-        )
+        _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n)
     return n_done
 
 
@@ -808,104 +681,66 @@ def step_episodes(
 
 
 @njit(cache=True)
-def observe_episodes(
-    episodes, out, masks, pos, vel, level, active, ac_dir, ac_speed, ac_goal, steps, fp, low, high
-):
+def observe_episodes(episodes, obs, masks, s, c):
     """Observations (E, M, F) float32 and action masks (E, M, 27) int8 of every controlled
-    aircraft of episodes ``episodes``, written into ``out`` and ``masks``; the layout is
+    aircraft of episodes ``episodes``, written into ``obs`` and ``masks``; the layout is
     :mod:`cdr_bench.sim.observation`'s table.
 
     Neighbours are the K nearest other aircraft in the sky (horizontal distance, any level;
     ties to the lower index); empty slots are zero. Every value is clipped to [low, high].
     """
-    row = np.zeros(out.shape[2])
-    best_d = np.empty(max((out.shape[2] - 12) // 10, 1))
+    row = np.zeros(obs.shape[2])
+    best_d = np.empty(max((obs.shape[2] - 12) // 10, 1))
     best_n = np.empty(best_d.shape[0], dtype=np.int64)
     for ie in range(episodes.shape[0]):
-        _observe_episode(
-            episodes[ie],
-            out,
-            masks,
-            pos,
-            vel,
-            level,
-            active,
-            ac_dir,
-            ac_speed,
-            ac_goal,
-            steps,
-            fp,
-            low,
-            high,
-            row,
-            best_d,
-            best_n,
-        )
+        _observe_episode(episodes[ie], obs, masks, s, c, row, best_d, best_n)
 
 
 @njit(cache=True)
-def _observe_episode(
-    e,
-    out,
-    masks,
-    pos,
-    vel,
-    level,
-    active,
-    ac_dir,
-    ac_speed,
-    ac_goal,
-    steps,
-    fp,
-    low,
-    high,
-    row,
-    best_d,
-    best_n,
-):
+def _observe_episode(e, obs, masks, s, c, row, best_d, best_n):
     """:func:`observe_episodes` of episode ``e`` (``row``, ``best_*``: scratch space)."""
-    M = ac_dir.shape[1]
-    N = pos.shape[1]
+    M = s.ac_dir.shape[1]
+    N = s.pos.shape[1]
     B = N - M
-    F = out.shape[2]
+    F = obs.shape[2]
     K = (F - 12) // 10
-    size = fp[P_SIZE]
-    rng_km = fp[P_RANGE]
-    look = fp[P_LOOKAHEAD]
-    los_km = fp[P_LOS]
-    lo_v, hi_v = fp[P_MIN_SPEED], fp[P_MAX_SPEED]
+    size = c.fp[P_SIZE]
+    rng_km = c.fp[P_RANGE]
+    look = c.fp[P_LOOKAHEAD]
+    los_km = c.fp[P_LOS]
+    lo_v, hi_v = c.fp[P_MIN_SPEED], c.fp[P_MAX_SPEED]
     mid = 0.5 * (lo_v + hi_v)
     half = max(0.5 * (hi_v - lo_v), 1e-9)
-    inv_steps = 1.0 / fp[P_MAX_STEPS]
+    inv_steps = 1.0 / c.fp[P_MAX_STEPS]
     for m in range(M):
         i = B + m
-        x, y = pos[e, i, 0], pos[e, i, 1]
-        ux, uy = ac_dir[e, m, 0], ac_dir[e, m, 1]
-        gx = ac_goal[e, m, 0] - x
-        gy = ac_goal[e, m, 1] - y
+        x, y = s.pos[e, i, 0], s.pos[e, i, 1]
+        ux, uy = s.ac_dir[e, m, 0], s.ac_dir[e, m, 1]
+        gx = s.ac_goal[e, m, 0] - x
+        gy = s.ac_goal[e, m, 1] - y
         gd = math.sqrt(gx * gx + gy * gy)
         inv_gd = 1.0 / max(gd, 1e-9)
         row[0] = x * (2.0 / size) - 1.0
         row[1] = y * (2.0 / size) - 1.0
         row[2] = ux  # sin(heading)
         row[3] = uy  # cos(heading)
-        row[4] = (ac_speed[e, m] - mid) / half
-        row[5] = level[e, i] - 1.0
+        row[4] = (s.ac_speed[e, m] - mid) / half
+        row[5] = s.level[e, i] - 1.0
         row[6] = gx / size
         row[7] = gy / size
         row[8] = gd / size
         row[9] = (gx * uy - gy * ux) * inv_gd  # sin(bearing - heading): + goal to the right
         row[10] = (gx * ux + gy * uy) * inv_gd  # cos(bearing - heading)
-        row[11] = steps[e] * inv_steps
+        row[11] = s.steps[e] * inv_steps
 
         # K nearest others by insertion on squared distances (strict <: the lower index
         # wins a tie); the square root is taken for the K chosen only.
         found = 0
         for n in range(N):
-            if n == i or not active[e, n]:
+            if n == i or not s.active[e, n]:
                 continue
-            dx = pos[e, n, 0] - x
-            dy = pos[e, n, 1] - y
+            dx = s.pos[e, n, 0] - x
+            dy = s.pos[e, n, 1] - y
             d = dx * dx + dy * dy
             if found < K:
                 j = found
@@ -927,11 +762,11 @@ def _observe_episode(
                     row[base + f] = 0.0
                 continue
             n = best_n[k]
-            px = pos[e, n, 0] - x
-            py = pos[e, n, 1] - y
-            vx = vel[e, n, 0] - vel[e, i, 0]
-            vy = vel[e, n, 1] - vel[e, i, 1]
-            dlevel = float(level[e, n] - level[e, i])
+            px = s.pos[e, n, 0] - x
+            py = s.pos[e, n, 1] - y
+            vx = s.vel[e, n, 0] - s.vel[e, i, 0]
+            vy = s.vel[e, n, 1] - s.vel[e, i, 1]
+            dlevel = float(s.level[e, n] - s.level[e, i])
             d_cpa, t_cpa = closest_approach(px, py, vx, vy, look)
             row[base] = 1.0
             row[base + 1] = px / rng_km
@@ -944,8 +779,8 @@ def _observe_episode(
             row[base + 8] = d_cpa / rng_km
             row[base + 9] = 1.0 if dlevel == 0.0 and d_cpa < los_km else 0.0
         for f in range(F):
-            out[e, m, f] = min(max(row[f], low[f]), high[f])
-        lv = level[e, i]
+            obs[e, m, f] = min(max(row[f], c.low[f]), c.high[f])
+        lv = s.level[e, i]
         for a in range(27):
             a_h = a % 3 - 1
             masks[e, m, a] = 0 <= lv + a_h < N_LEVELS
