@@ -85,27 +85,31 @@ _FEASIBLE_LCM = 27 * 18 * 9 * 2**40  # a multiple of every count: no modulo bias
 
 @dataclass(slots=True)
 class VectorStep:
-    """What :meth:`VectorEnv.step` returns; every array is fresh."""
+    """What :meth:`VectorEnv.step` returns: the simulator's :class:`StepResult` of the step and,
+    with auto-reset, what the episodes that restarted ended with. Every array is fresh."""
 
-    obs: NDArray[np.float32]
-    """(E, M, F) observations now (of the new episode where one auto-reset)"""
-    action_mask: NDArray[np.int8]
-    """(E, M, 27) feasible actions now"""
-    reward: NDArray[np.float64]
-    """(E, M) reward of the step (0 for aircraft that did not fly)"""
-    terminated: NDArray[np.bool_]
-    """(E, M) the aircraft's flight ended this step (success, LoS, NMAC, boundary)"""
-    truncated: NDArray[np.bool_]
-    """(E, M) the horizon ended the aircraft's flight this step (timeout)"""
     result: StepResult
-    """everything the simulator reports of the step (named reward terms, events, outcomes)"""
-    episode_done: NDArray[np.bool_]
-    """(E,) the episode's last aircraft finished this step"""
+    """everything the simulator reports of the step (named reward terms, events, outcomes);
+    its ``obs`` and ``action_mask`` are those of the new episode where one restarted"""
     final_obs: NDArray[np.float32]
     """(E, M, F) observations at the end of the step, before any auto-reset (``obs`` itself
     when nothing was reset)"""
     final_episode_seeds: NDArray[np.uint64]
     """(E,) seed of the episode each slot held during the step"""
+
+    obs = property(lambda self: self.result.obs, doc="(E, M, F) observations now")
+    action_mask = property(lambda self: self.result.action_mask, doc="(E, M, 27) feasible now")
+    reward = property(lambda self: self.result.reward, doc="(E, M) reward of the step")
+    terminated = property(
+        lambda self: self.result.terminated,
+        doc="(E, M) the flight ended this step (success, LoS, NMAC, boundary)",
+    )
+    truncated = property(
+        lambda self: self.result.truncated, doc="(E, M) the horizon ended the flight (timeout)"
+    )
+    episode_done = property(
+        lambda self: self.result.episode_done, doc="(E,) the episode's last aircraft finished"
+    )
 
 
 class VectorEnv:
@@ -196,17 +200,7 @@ class VectorEnv:
             sim.reset(chosen, episodes=ended)
             self.episode_seeds[ended] = chosen
             sim.observe(ended, obs=obs, masks=masks)
-        return VectorStep(
-            obs=obs,
-            action_mask=masks,
-            reward=res.reward,
-            terminated=res.terminated,
-            truncated=res.truncated,
-            result=res,
-            episode_done=res.episode_done,
-            final_obs=final_obs,
-            final_episode_seeds=final_seeds,
-        )
+        return VectorStep(res, final_obs, final_seeds)
 
     # -- state -----------------------------------------------------------------------------------
 

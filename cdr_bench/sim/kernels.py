@@ -298,6 +298,17 @@ def _clear_of_traffic(e, x, y, clearance, lv, s, B):
 
 
 @njit(cache=True)
+def _near_controlled(e, x, y, clearance, s, B, upto):
+    """A learning intruder 1..upto-1 already placed closer than ``clearance`` km to (x, y)."""
+    for p in range(1, upto):
+        dx = x - s.pos[e, B + p, 0]
+        dy = y - s.pos[e, B + p, 1]
+        if math.sqrt(dx * dx + dy * dy) < clearance:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _place_controlled(e, rs, s, c, B):
     """Learning intruders at the entry of their airway on a level clear of traffic, then the
     ownship (explicit, or on the boundary clear of traffic heading for a random goal).
@@ -312,14 +323,8 @@ def _place_controlled(e, rs, s, c, B):
         for i in range(N_LEVELS - 1, 0, -1):  # Fisher-Yates
             j = _below(rs, i + 1)
             perm[i], perm[j] = perm[j], perm[i]
-        near_placed = False
-        for p in range(1, k):
-            dx = sx - s.pos[e, B + p, 0]
-            dy = sy - s.pos[e, B + p, 1]
-            if math.sqrt(dx * dx + dy * dy) < clearance:
-                near_placed = True
         found = -1
-        if not near_placed:
+        if not _near_controlled(e, sx, sy, clearance, s, B, k):
             for i in range(N_LEVELS):
                 if _clear_of_traffic(e, sx, sy, clearance, perm[i], s, B):
                     found = perm[i]
@@ -362,13 +367,7 @@ def _place_controlled(e, rs, s, c, B):
             x, y = 0.0, size - u
         if not _clear_of_traffic(e, x, y, clearance, -1, s, B):
             continue
-        ok = True
-        for p in range(1, M):
-            dx = x - s.pos[e, B + p, 0]
-            dy = y - s.pos[e, B + p, 1]
-            if math.sqrt(dx * dx + dy * dy) < clearance:
-                ok = False
-        if not ok:
+        if _near_controlled(e, x, y, clearance, s, B, M):
             continue
         s.pos[e, B, 0], s.pos[e, B, 1] = x, y
         dx, dy = gx - x, gy - y
