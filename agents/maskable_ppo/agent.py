@@ -1,9 +1,11 @@
 """MaskablePPO agent (cdr-bench agent protocol), trained by ``cdr-bench train maskable-ppo``.
 
 ``checkpoint.pt`` beside this file (or ``CDR_BENCH_CHECKPOINT``) holds the actor's weights only,
-exported from the SB3 model and read with ``torch.load(weights_only=True)`` into the layers
-rebuilt by :func:`cdr_bench.rl.sb3_policies.load_actor` (no SB3 zip is shipped: those unpickle).
-Decision: argmax of the masked logits (SB3's ``deterministic=True``) -- never a masked action.
+exported from the SB3 model (:func:`cdr_bench.rl.sb3_policies.export_actor`: Linear+Tanh x 3,
+Linear -> 27 logits) and read with ``torch.load(weights_only=True)``; no SB3 zip is shipped
+(those unpickle). Decision: argmax of the masked logits (SB3's ``deterministic=True``) -- never
+a masked action -- computed on the fixed numeric path of :mod:`cdr_bench.inference` (same bits
+on every x86-64 CPU; torch only reads the file).
 """
 
 from __future__ import annotations
@@ -14,9 +16,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from cdr_bench.rl.sb3_policies import load_actor
+from cdr_bench.inference import MLP, masked_argmax
 
 DEFAULT_CHECKPOINT = Path(__file__).with_name("checkpoint.pt")
+
+
+def load_checkpoint(path: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """(config, state dict as numpy arrays) of a weights-only checkpoint."""
+    ck = torch.load(path, map_location="cpu", weights_only=True)
+    return ck["config"], {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
 
 
 class Agent:
@@ -24,17 +32,16 @@ class Agent:
         self.checkpoint = (
             checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(DEFAULT_CHECKPOINT)
         )
-        self.net, _ = load_actor(self.checkpoint)
+        config, state = load_checkpoint(self.checkpoint)
+        if config.get("kind") != "ppo":
+            raise ValueError(f"{self.checkpoint}: not a PPO actor (kind {config.get('kind')!r})")
+        self.net = MLP.from_state_dict(state, "", "tanh")
 
     def reset(self, seed: int | None = None) -> None:
         """Deterministic policy: nothing to re-seed."""
 
     def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32))
-        mask = torch.as_tensor(np.asarray(masks, dtype=np.int8))
-        with torch.no_grad():
-            logits = self.net(obs).masked_fill(mask == 0, -torch.inf)
-        return logits.argmax(1).numpy().astype(np.int64)
+        return masked_argmax(self.net(observations), masks)
 
     def act(self, obs_dict: dict) -> int:
         return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])
