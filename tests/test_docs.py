@@ -30,3 +30,10 @@ def test_env_card_documents_every_observation_index():
         assert f"| {i} | {name} |" in doc
     for j, name in enumerate(NEIGHBOUR_FEATURES):
         assert f"| 12 + 10k + {j} | {name} |" in doc
+
+
+def test_readme_batched_quick_start_runs():
+    text = (ROOT / "README.md").read_text()
+    blocks = [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
+    (block,) = [b for b in blocks if "make_vec" in b]
+    exec(compile(block, "README.md (batched quick start)", "exec"), {})
