@@ -157,8 +157,9 @@ def test_a_copied_env_continues_exactly_like_the_original(how):
             break
         a = env.step({x: 22 for x in env.agents})
         b = twin.step({x: 22 for x in twin.agents})
-        assert a[1] == b[1] and a[4]["ownship_0"]["min_separation_km"] == (
-            b[4]["ownship_0"]["min_separation_km"]
+        assert (
+            a[1] == b[1]
+            and a[4]["ownship_0"]["min_separation_km"] == (b[4]["ownship_0"]["min_separation_km"])
         )
         assert np.array_equal(a[0]["ownship_0"]["observation"], b[0]["ownship_0"]["observation"])
     assert twin.vector.sim.state.pos is twin.vector.sim.pos_km  # the tuple still holds the arrays

@@ -10,8 +10,8 @@ from __future__ import annotations
 import pytest
 
 from cdr_bench.actions import decode
-from cdr_bench.scenarios import load_scenario
 from cdr_bench.evaluate.search import rollout, successful_first_actions
+from cdr_bench.scenarios import load_scenario
 
 TACTICAL = ("tactical/head-on", "tactical/crossing", "tactical/overtaking")
 

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cdr_bench.scenarios import list_scenarios, load_scenario
-from cdr_bench.sim import Simulator, kernels, observe
+from cdr_bench.sim import Simulator, observe
 from cdr_bench.sim.geometry import exact_unit_vector
 
 
