@@ -155,6 +155,9 @@ class CDREnv(ParallelEnv):
     ## Version History
 
     * v0 (scenario version 1): initial release.
+    * v0 (scenario version 2, cdr-bench 0.2.0): the same model on one compiled simulator; new
+      episode streams (splitmix64) and headings carried as exactly rotated unit vectors, so every
+      episode differs from version 1 (docs/model.md §12).
     """
 
     metadata: dict[str, Any] = {
