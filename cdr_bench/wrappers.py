@@ -1,25 +1,31 @@
 """Adapters for tools that want flat ``Box`` observations (SuperSuit, Stable-Baselines3).
 
-* :class:`FlatObservation` turns the ``{"observation", "action_mask"}`` dict of every agent into
-  one float32 ``Box`` (the observation, optionally followed by the 27 mask flags). SuperSuit's
-  ``black_death_v3`` (needed because learning aircraft leave the episode) requires this.
-* :func:`sb3_vec_env` builds the SuperSuit pipeline ``FlatObservation -> black_death_v3 ->
-  pettingzoo_env_to_vec_env_v1 -> concat_vec_envs_v1`` as a Stable-Baselines3 ``VecEnv``, with the
-  ``seed()`` method SuperSuit's vector env lacks (the seed applies to the next reset). Every
-  learning aircraft is one slot of the vector env (parameter sharing).
+* :class:`FlatObservation` turns the ``{"observation", "action_mask"}`` dict of every agent of the
+  PettingZoo env into one float32 ``Box`` (the observation, optionally followed by the 27 mask
+  flags). SuperSuit's ``black_death_v3`` (needed because learning aircraft leave the episode)
+  requires this.
+* :func:`sb3_vec_env` is a Stable-Baselines3 ``VecEnv`` built natively on the batched
+  :class:`~cdr_bench.vector_env.VectorEnv` (no SuperSuit, no subprocesses); every controlled
+  aircraft of every episode is one slot (parameter sharing). :func:`vector_env_to_sb3` is the
+  adapter itself, which the trainers put on their training environment.
 
-SuperSuit and Stable-Baselines3 are imported lazily: they are training extras.
+Stable-Baselines3 is imported lazily: it is a training extra.
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 from pettingzoo.utils import BaseParallelWrapper
 
+from cdr_bench.actions import N_ACTIONS
 from cdr_bench.env import CDREnv
+from cdr_bench.sim import observation_bounds
+from cdr_bench.vector_env import VectorEnv
 
 
 class FlatObservation(BaseParallelWrapper):
@@ -69,39 +75,174 @@ def sb3_vec_env(
     seed: int | None = None,
     **overrides: Any,
 ) -> Any:
-    """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` copies of a (multi-agent) scenario.
+    """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` episodes of a (multi-agent) scenario
+    (``overrides``: nested scenario fields).
 
-    Slots: ``num_envs * len(possible_agents)``; aircraft that have left receive zero observations
-    and rewards until the whole episode ends (SuperSuit's black death), then all slots reset.
+    Slots: ``num_envs * (1 + learning intruders)``, episode-major. ``seed`` seeds the stream of
+    episode seeds (``venv.seed(s)`` re-seeds it at the next reset). See
+    :func:`vector_env_to_sb3` for what a slot sees.
     """
-    import supersuit as ss
-    from stable_baselines3.common.vec_env import VecEnvWrapper
+    return vector_env_to_sb3(VectorEnv(scenario, num_envs, seed=seed, **overrides), include_mask)
 
-    par = FlatObservation(CDREnv(scenario, **overrides), include_mask=include_mask)
-    par = ss.black_death_v3(par)
-    vec = ss.pettingzoo_env_to_vec_env_v1(par)
-    vec = ss.concat_vec_envs_v1(vec, num_envs, num_cpus=0, base_class="stable_baselines3")
 
-    class _Seeded(VecEnvWrapper):  # SuperSuit's vector env has no seed(); add it
-        def __init__(self, venv: Any):
-            super().__init__(venv)
-            self._next_seed = seed
+def vector_env_to_sb3(
+    source: Any,
+    include_mask: bool = True,
+    continuous_actions: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Any:
+    """The Stable-Baselines3 ``VecEnv`` of a :class:`~cdr_bench.vector_env.VectorEnv` without
+    auto-reset (the adapter restarts its episodes), or of a source with the same face that
+    restarts them itself and reports ``final_action_mask`` (the trainers'
+    :class:`cdr_bench.rl.curriculum.CurriculumEnv`).
 
-        def seed(self, seed: int | None = None) -> list[int | None]:
-            self._next_seed = seed
-            return [seed] * self.num_envs
+    * Each controlled aircraft of each episode is one slot (slot ``e * M + m``). An aircraft
+      that has left gets a zero observation and zero reward ("black death") until its episode
+      ends; then every slot of the episode is ``done`` at once (``infos[i]["terminal_observation"]``
+      its last observation, ``"TimeLimit.truncated"`` when its flight was cut rather than
+      terminated, ``"episode"`` its return and length) and the next observation is the first of
+      the new episode.
+    * ``include_mask`` appends the 27 feasibility flags (0.0 / 1.0) to the observation.
+      ``env_method("action_masks")`` returns them as booleans for sb3-contrib's
+      ``MaskablePPO`` (only "hold" for an aircraft that has left: its action is ignored).
+    * ``seed(s)`` re-seeds the episode-seed stream at the next ``reset()``.
+    * ``continuous_actions``: the action space is ``Box(-1, 1, (3,))`` and this maps (N, 3)
+      actions to action indices (TD3).
+    """
+    return _adapter_class()(source, include_mask, continuous_actions)
 
-        def reset(self) -> Any:
-            s, self._next_seed = self._next_seed, None
-            if s is None:
-                return self.venv.reset()
-            # SuperSuit's SB3 wrapper forwards a reset seed to a seed() that does not exist below
-            # it; reset the concatenated vector env underneath it directly instead.
-            inner: Any = self.venv
-            obs, inner.reset_infos = inner.venv.reset(seed=s)
-            return obs
+
+_HOLD_ONLY = np.arange(N_ACTIONS) == 13
+
+
+@functools.cache
+def _adapter_class() -> type:
+    from stable_baselines3.common.vec_env import VecEnv
+
+    class VectorEnvSB3(VecEnv):
+        __doc__ = vector_env_to_sb3.__doc__
+
+        def __init__(
+            self,
+            source: Any,
+            include_mask: bool,
+            continuous_actions: Callable[[np.ndarray], np.ndarray] | None,
+        ):
+            self.source, self.include_mask = source, include_mask
+            self.to_index = continuous_actions
+            self._shape = (source.num_envs, source.n_agents)
+            low, high = observation_bounds(source.config)
+            if include_mask:
+                low = np.concatenate([low, np.zeros(N_ACTIONS, np.float32)])
+                high = np.concatenate([high, np.ones(N_ACTIONS, np.float32)])
+            act_space: spaces.Space = (
+                spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
+                if continuous_actions is not None
+                else spaces.Discrete(N_ACTIONS)
+            )
+            n = source.num_envs * source.n_agents
+            super().__init__(n, spaces.Box(low, high, dtype=np.float32), act_space)
+            self.ep_return = np.zeros(n)
+            self.ep_length = np.zeros(n, np.int64)
+            self._seed: int | None = None
+            self._actions = np.full(n, 13)
+            self._observe(*source.observe())
+
+        def _slots(self, obs: np.ndarray, masks: np.ndarray, flying: np.ndarray) -> np.ndarray:
+            """(E, M, .) arrays -> (slots, .) observations, zero where not ``flying``."""
+            live = flying.reshape(-1, 1)
+            out = np.where(live, obs.reshape(live.shape[0], -1), np.float32(0))
+            if self.include_mask:
+                flags = np.where(live, masks.reshape(live.shape[0], -1), 0).astype(np.float32)
+                out = np.concatenate([out, flags], axis=1)
+            return out
+
+        def _observe(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
+            self._flying = self.source.flying.reshape(-1)
+            feasible = masks.reshape(-1, N_ACTIONS) != 0
+            self._masks = np.where(self._flying[:, None], feasible, _HOLD_ONLY)
+            return self._slots(obs, masks, self._flying)
+
+        def reset(self) -> np.ndarray:
+            seed, self._seed = self._seed, None
+            self.ep_return[:] = 0
+            self.ep_length[:] = 0
+            return self._observe(*self.source.reset(seed=seed))
+
+        def step_async(self, actions: np.ndarray) -> None:
+            self._actions = np.asarray(actions)
 
         def step_wait(self) -> Any:
-            return self.venv.step_wait()
+            a = self._actions if self.to_index is None else self.to_index(self._actions)
+            st = self.source.step(np.asarray(a, np.int64).reshape(self._shape))
+            reward = st.reward.reshape(-1).astype(np.float32)
+            acting = st.result.acting.reshape(-1)
+            self.ep_return += reward
+            self.ep_length += acting
+            obs, masks = st.obs, st.action_mask
+            final_masks = getattr(st, "final_action_mask", masks)
+            if not self.source.autoreset and st.episode_done.any():
+                obs, masks = self.source.reset(episodes=np.flatnonzero(st.episode_done))
+            done = np.repeat(st.episode_done, self._shape[1])
+            infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+            if done.any():
+                final = self._slots(st.final_obs, final_masks, acting)
+                cut = acting & ~st.terminated.reshape(-1)
+                for i in np.flatnonzero(done):
+                    infos[i] = {
+                        "terminal_observation": final[i],
+                        "TimeLimit.truncated": bool(cut[i]),
+                        "episode": {"r": float(self.ep_return[i]), "l": int(self.ep_length[i])},
+                    }
+                self.ep_return[done] = 0
+                self.ep_length[done] = 0
+            return self._observe(obs, masks), reward, done, infos
 
-    return _Seeded(vec)
+        def action_masks(self) -> np.ndarray:
+            """(slots, 27) feasible actions (booleans) of the current observations."""
+            return self._masks.copy()
+
+        def seed(self, seed: int | None = None) -> Sequence[int | None]:
+            self._seed = seed
+            return [seed] * self.num_envs
+
+        def state_dict(self) -> dict[str, Any]:
+            return {"ep_return": self.ep_return.copy(), "ep_length": self.ep_length.copy()}
+
+        def load_state_dict(self, state: dict[str, Any]) -> None:
+            """Continue on ``source`` (already restored) with these episode statistics."""
+            self.ep_return[:], self.ep_length[:] = state["ep_return"], state["ep_length"]
+            self._observe(*self.source.observe())
+
+        def close(self) -> None:
+            pass
+
+        def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+            if attr_name == "render_mode":
+                value = None
+            elif attr_name == "action_masks":
+                value = self.action_masks
+            else:
+                value = getattr(self.source, attr_name)
+            return [value] * len(self._indices(indices))
+
+        def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+            raise AttributeError(f"cannot set {attr_name!r} per slot")
+
+        def env_method(
+            self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+        ) -> list[Any]:
+            if method_name != "action_masks":
+                raise AttributeError(method_name)
+            return [self._masks[i] for i in self._indices(indices)]
+
+        def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+            return [False] * len(self._indices(indices))
+
+        def _indices(self, indices: Any) -> Sequence[int]:
+            if indices is None:
+                return range(self.num_envs)
+            if isinstance(indices, int):
+                return [indices]
+            return list(indices)
+
+    return VectorEnvSB3

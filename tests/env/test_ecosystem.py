@@ -38,27 +38,121 @@ def test_maskable_ppo_short_run():
     assert 0 <= int(action) < 27
 
 
-def test_supersuit_sb3_ppo_with_learning_intruders():
+def test_sb3_vec_env_ppo_with_learning_intruders():
     sb3 = pytest.importorskip("stable_baselines3")
-    pytest.importorskip("supersuit")
     from cdr_bench.wrappers import sb3_vec_env
 
     venv = sb3_vec_env("marl/low-2", num_envs=2, seed=0)
-    assert venv.num_envs == 2 * 3  # two copies x (ownship + 2 learning intruders)
+    assert isinstance(venv, sb3.common.vec_env.VecEnv)
+    assert venv.num_envs == 2 * 3  # two episodes x (ownship + 2 learning intruders)
     assert venv.observation_space.shape == (42 + 27,)
     model = sb3.PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, verbose=0)
     model.learn(2 * 3 * 32 * 2)
     assert model.num_timesteps >= 2 * 3 * 32 * 2
     obs = venv.reset()
     assert obs.shape == (6, 69) and np.isfinite(obs).all()
+    assert venv.observation_space.contains(obs[0])
+
+
+def test_supersuit_pipeline_to_sb3():
+    """SuperSuit users keep FlatObservation: black death, Markov vector env, SB3 concat."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    ss = pytest.importorskip("supersuit")
+    from cdr_bench.env import CDREnv
+    from cdr_bench.wrappers import FlatObservation
+
+    par = ss.black_death_v3(FlatObservation(CDREnv("marl/low-2"), include_mask=True))
+    vec = ss.pettingzoo_env_to_vec_env_v1(par)
+    venv = ss.concat_vec_envs_v1(vec, 2, num_cpus=0, base_class="stable_baselines3")
+    assert venv.num_envs == 6 and venv.observation_space.shape == (69,)
+    # No seed: SuperSuit's vector env has no seed() for SB3 to call.
+    model = sb3.PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, verbose=0)
+    model.learn(6 * 32)
+    assert model.num_timesteps >= 6 * 32
 
 
 def test_vec_env_seed_makes_resets_reproducible():
-    pytest.importorskip("supersuit")
+    pytest.importorskip("stable_baselines3")
     from cdr_bench.wrappers import sb3_vec_env
 
-    a = sb3_vec_env("marl/low-2", num_envs=1)
-    b = sb3_vec_env("marl/low-2", num_envs=1)
-    a.seed(5)
+    a = sb3_vec_env("marl/low-2", num_envs=2)
+    b = sb3_vec_env("marl/low-2", num_envs=2)
+    assert a.seed(5) == [5] * 6
     b.seed(5)
-    np.testing.assert_array_equal(a.reset(), b.reset())
+    first = a.reset()
+    np.testing.assert_array_equal(first, b.reset())
+    assert not np.array_equal(first, a.reset())  # the stream goes on
+    c, d = (
+        sb3_vec_env("marl/low-2", num_envs=2, seed=7),
+        sb3_vec_env("marl/low-2", num_envs=2, seed=7),
+    )
+    np.testing.assert_array_equal(c.reset(), d.reset())
+
+
+def test_black_death_slots_and_episode_ends():
+    """An aircraft that has left gets zero observations, zero reward and only "hold" until its
+    episode ends; then all the episode's slots are done together, with terminal observations."""
+    pytest.importorskip("stable_baselines3")
+    from cdr_bench.wrappers import sb3_vec_env
+
+    venv = sb3_vec_env("marl/low-2", num_envs=3, seed=1, time={"max_steps": 80})
+    venv.reset()
+    hold = np.zeros(27, bool)
+    hold[13] = True
+    rng = np.random.default_rng(0)
+    saw_dead = saw_done = saw_truncated = False
+    alive = np.ones(9, bool)
+    for _ in range(400):
+        obs, reward, done, infos = venv.step(rng.integers(0, 27, 9))
+        masks = np.stack(venv.env_method("action_masks"))
+        assert venv.has_attr("action_masks") and masks.shape == (9, 27) and masks.dtype == bool
+        flying = venv.unwrapped.source.flying.reshape(-1)
+        dead = ~flying & ~done
+        assert (obs[dead] == 0).all() and (masks[dead] == hold).all()
+        assert (obs[flying][:, 42:] == masks[flying]).all()  # the appended mask flags
+        assert (reward[~alive & ~done] == 0).all()  # left before this step: no reward
+        saw_dead |= bool(dead.any())
+        for e in range(3):
+            assert done[3 * e : 3 * e + 3].all() or not done[3 * e : 3 * e + 3].any()
+        for i in np.flatnonzero(done):
+            saw_done = True
+            info = infos[i]
+            assert info["terminal_observation"].shape == (69,) and "episode" in info
+            if not alive[i]:
+                assert (info["terminal_observation"] == 0).all()
+                assert not info["TimeLimit.truncated"]
+            saw_truncated |= info["TimeLimit.truncated"]
+            assert (obs[i] != 0).any()  # the first observation of the next episode
+        alive = flying | done
+    assert saw_dead and saw_done and saw_truncated  # the 80-step horizon cuts flights
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_maskable_ppo_through_the_batched_adapter(masked):
+    """A few hundred steps of MaskablePPO through the adapter never request a masked level
+    change; unmasked PPO on the same env does."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    from cdr_bench.vector_env import VectorEnv
+    from cdr_bench.wrappers import vector_env_to_sb3
+
+    class Counting(VectorEnv):
+        invalid = 0
+
+        def step(self, actions):
+            st = super().step(actions)
+            Counting.invalid += int(st.result.invalid_action.sum())
+            return st
+
+    Counting.invalid = 0
+    venv = vector_env_to_sb3(Counting("low", 8, seed=0), include_mask=False)
+    cls = sb3_contrib.MaskablePPO if masked else sb3.PPO
+    model = cls("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, verbose=0)
+    model.learn(8 * 32 * 2)
+    assert model.num_timesteps >= 512
+    assert (Counting.invalid == 0) if masked else (Counting.invalid > 0)
+    if masked:
+        obs = venv.reset()
+        masks = np.stack(venv.env_method("action_masks"))
+        action, _ = model.predict(obs, action_masks=masks)
+        assert masks[np.arange(8), action].all()
