@@ -40,7 +40,7 @@ for name in "${names[@]}"; do
     cp "$run/args.json" "$ag/train_args.json"
     [ -f "$run/curve.png" ] && cp "$run/curve.png" "$ag/curve.png"
     mkdir -p "$ag/analysis"
-    "$py" -m cdr_bench latency "$ag" --out "$ag/analysis/latency.json" > "$ag/analysis/latency.md"
+    "$py" -m cdr_bench latency "$ag" --out "$ag/analysis/latency.json"
     echo "$(date -u +%T) trained $name"
 done
 echo "$(date -u +%T) evaluate ${names[*]}"

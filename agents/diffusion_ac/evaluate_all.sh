@@ -9,7 +9,7 @@
 #              1000 episodes each) and diffusion-ac.multimodal-<scenario>.json (Fig. 9)
 #   ablations  leaderboard/results/diffusion-ac-100k.json|.jsonl, diffusion-ac-no-<part>.*
 #              (ablations/<name>-100k.pt on the paper suite)
-#   analysis   analysis/latency.json and latency.md (cdr-bench latency)
+#   analysis   analysis/latency.json (cdr-bench latency)
 # The leaderboard build also re-renders the leaderboard and every results table in the docs
 # (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
 set -euo pipefail
@@ -28,7 +28,7 @@ for part in "${parts[@]}"; do
                 diffusion-ac-no-diffusion diffusion-ac-no-double-q diffusion-ac-no-dpsc \
                 diffusion-ac-no-value-guidance ;;
         analysis)
-            "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json > $ag/analysis/latency.md ;;
+            "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;
     esac
 done
