@@ -14,9 +14,10 @@ import time
 import numpy as np
 import torch
 
-from cdr_bench.rl.replay import ReplayBuffer
-from cdr_bench.rl.train_diffusion_ac import Args, build_agent
-from cdr_bench.rl.vecenv import Curriculum, TrainEnv
+from cdr_bench.rl.curriculum import Curriculum, CurriculumEnv
+from cdr_bench.rl.offpolicy import collect
+from cdr_bench.rl.replay import Replay, ReplayConfig
+from cdr_bench.rl.train_diffusion_ac import Args, build
 
 
 def main() -> None:
@@ -28,31 +29,27 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     a = Args(n_envs=args.n_envs)
-    env = TrainEnv(a.n_envs, seed=0, curriculum=Curriculum(start=args.stage), max_episode_steps=200)
-    obs_dim = env.observe()[0].shape[1]
-    agent = build_agent(a, obs_dim)
-    gen = torch.Generator().manual_seed(0)
-    buf = ReplayBuffer(100_000, obs_dim)
+    env = CurriculumEnv(
+        a.n_envs, seed=0, curriculum=Curriculum(start=args.stage), max_episode_steps=200
+    )
+    obs_dim = env.observation_size
+    agent = build(a, obs_dim)
+    agent.schedule(0, args.stage)
+    buf = Replay(ReplayConfig(), 100_000, obs_dim, env.num_envs * env.n_agents, a.gamma)
 
     n, t0 = 0, time.perf_counter()
+    obs, mask = env.observe()
     while time.perf_counter() - t0 < args.seconds:
-        obs, mask, flying = env.observe()
-        act = np.full(len(flying), 13)
-        act[flying] = agent.policy.act(
-            torch.from_numpy(obs[flying]), torch.from_numpy(mask[flying]), gen, sample=True
-        ).numpy()
-        tr = env.step(act)
-        buf.add(
-            *(tr[k] for k in ("obs", "mask", "action", "reward", "next_obs", "next_mask", "done"))
-        )
-        n += len(tr["action"])
+        st, k = collect(env, agent, buf, obs, mask)
+        obs, mask = st.obs, st.action_mask
+        n += k
     env_sps = n / (time.perf_counter() - t0)
 
     rng = np.random.default_rng(0)
     u, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < args.seconds:
-        b = {k: torch.from_numpy(v) for k, v in buf.sample(a.batch_size, rng).items()}
-        agent.update(b, 0.1)
+        b = {k: torch.from_numpy(v) for k, v in buf.sample(a.batch_size, rng, 0.4).items()}
+        agent.update(b)
         u += 1
     ups = u / (time.perf_counter() - t0)
     combined = 1.0 / (1.0 / env_sps + 1.0 / (a.update_every * ups))

@@ -14,14 +14,16 @@ from cdr_bench.errors import UserError
 
 TRAINERS: dict[str, str] = {
     "diffusion-ac": "cdr_bench.rl.train_diffusion_ac",
-    "ppo": "cdr_bench.rl.train_ppo",
-    "maskable-ppo": "cdr_bench.rl.train_maskable_ppo",
-    "td3": "cdr_bench.rl.train_td3",
+    "ppo": "cdr_bench.rl.train_sb3",
+    "maskable-ppo": "cdr_bench.rl.train_sb3",
+    "td3": "cdr_bench.rl.train_sb3",
     "rainbow": "cdr_bench.rl.train_rainbow",
     "safe-dqn-x": "cdr_bench.rl.train_safe_dqn",
 }
-"""``cdr-bench train NAME``: trainer modules. Each exposes ``add_arguments(parser)`` (its flags)
-and ``run(namespace) -> dict`` (train, write the run directory, return a JSON summary)."""
+"""``cdr-bench train NAME``: trainer modules (one module may train several NAMEs). Each exposes
+``add_arguments(parser, name=None)`` (its flags; with ``name``, the parsed namespace's
+``algorithm`` is NAME) and ``run(namespace) -> dict`` (train, write the run directory, return a
+JSON summary)."""
 
 
 def register(sub: Any) -> None:
@@ -41,7 +43,7 @@ def register(sub: Any) -> None:
             description=module.__doc__,
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        module.add_arguments(p)
+        module.add_arguments(p, name)
         p.set_defaults(func=_train_with(module))
 
 

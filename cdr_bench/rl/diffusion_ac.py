@@ -7,9 +7,11 @@ schedule, actor ("diffusion" | "categorical"), twin, critic_width``.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 
 from cdr_bench.rl.diffusion import Schedule, masked_logits, masked_softmax
@@ -17,6 +19,7 @@ from cdr_bench.rl.networks import (
     N_ACTIONS,
     CategoricalActor,
     Denoiser,
+    LearnerParts,
     TwinCritic,
     frozen_copy,
     polyak_update,
@@ -119,16 +122,53 @@ def teacher_distribution(
     return masked_softmax(q / tau, mask)
 
 
-class DiffusionAC:
-    """Actor, twin critics, targets and optimisers; :meth:`update` is Algorithm 1."""
+class DiffusionAC(LearnerParts):
+    """Actor, twin critics, targets and optimisers; :meth:`update` is Algorithm 1. A
+    :class:`~cdr_bench.rl.offpolicy.Learner` of the off-policy loop.
 
-    def __init__(self, cfg: PolicyConfig, ucfg: UpdateConfig):
+    Args:
+        seed: seeds the generator of the exploring actions.
+        explore: action selection while training: "sample" from the masked softmax (Eq. 33) or
+            "argmax" (the inference rule).
+        tau: the teacher temperature as a function of the DPSC stage (None without the
+            curriculum); without it, :attr:`tau` stays as set.
+    """
+
+    PARTS = ("policy", "critic", "critic_target", "opt_actor", "opt_critic")
+    ACTOR = "policy"
+
+    def __init__(
+        self,
+        cfg: PolicyConfig,
+        ucfg: UpdateConfig,
+        seed: int = 0,
+        explore: str = "sample",
+        tau: Callable[[int | None], float] | None = None,
+    ):
         self.cfg, self.ucfg = cfg, ucfg
         self.policy = Policy(cfg)
         self.critic = TwinCritic(cfg.obs_dim, cfg.critic_width, twin=cfg.twin)
         self.critic_target: Any = frozen_copy(self.critic)
         self.opt_actor = torch.optim.Adam(self.policy.parameters(), lr=ucfg.lr_actor)
         self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=ucfg.lr_critic)
+        self.explore, self.tau_schedule = explore, tau
+        self.tau = 1.0
+        """teacher temperature of :meth:`update`"""
+        self.generator = torch.Generator().manual_seed(seed)
+        self.eval_generator = torch.Generator().manual_seed(12345)
+
+    def schedule(self, step: int, stage: int | None) -> dict[str, float]:
+        if self.tau_schedule is not None:
+            self.tau = self.tau_schedule(stage)
+        return {"tau": self.tau}
+
+    def act(self, obs: np.ndarray, mask: np.ndarray, explore: bool) -> np.ndarray:
+        """Exploring: ``explore`` rule with the training generator; else the argmax of the
+        masked head (the paper's inference) with a generator of its own."""
+        gen = self.generator if explore else self.eval_generator
+        sample = explore and self.explore == "sample"
+        o, m = torch.from_numpy(obs), torch.from_numpy(mask)
+        return self.policy.act(o, m, gen, sample=sample).numpy()
 
     def teacher(self, obs: torch.Tensor, mask: torch.Tensor, tau: float) -> torch.Tensor:
         """Eq. 37: softmax(min Q / tau) over feasible classes; tau = inf -> uniform over them.
@@ -139,8 +179,8 @@ class DiffusionAC:
             q = self.critic.min_q(obs)
             return teacher_distribution(q, mask, tau, self.ucfg.tau_relative)
 
-    def update(self, b: dict[str, torch.Tensor], tau: float) -> dict[str, float]:
-        u = self.ucfg
+    def update(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        u, tau = self.ucfg, self.tau
         obs, mask, a = b["obs"], b["mask"], b["action"]
         # (A) critics: masked double-Q max target (Eq. 34-35).
         with torch.no_grad():
@@ -208,31 +248,16 @@ class DiffusionAC:
         return loss_pi, stats
 
     def state_dict(self) -> dict:
-        return {
-            "policy": self.policy.state_dict(),
-            "critic": self.critic.state_dict(),
-            "critic_target": self.critic_target.state_dict(),
-            "opt_actor": self.opt_actor.state_dict(),
-            "opt_critic": self.opt_critic.state_dict(),
-        }
+        return {**super().state_dict(), "generator": self.generator.get_state()}
 
     def load_state_dict(self, sd: dict) -> None:
-        self.policy.load_state_dict(sd["policy"])
-        self.critic.load_state_dict(sd["critic"])
-        self.critic_target.load_state_dict(sd["critic_target"])
-        self.opt_actor.load_state_dict(sd["opt_actor"])
-        self.opt_critic.load_state_dict(sd["opt_critic"])
-
-
-def save_policy(path: str, policy: Policy, extra: dict | None = None) -> None:
-    """A small inference checkpoint: {"config": {...}, "state_dict": ..., "meta": {...}}."""
-    torch.save(
-        {"config": asdict(policy.cfg), "state_dict": policy.state_dict(), "meta": extra or {}},
-        path,
-    )
+        super().load_state_dict(sd)
+        self.generator.set_state(sd["generator"])
 
 
 def load_policy(path: str) -> Policy:
+    """The actor of a ``checkpoint.pt`` written by the trainer (``{"config": {...},
+    "state_dict": ..., "meta": {...}}``), read with ``weights_only=True``, in eval mode."""
     ck = torch.load(path, map_location="cpu", weights_only=True)
     pol = Policy(PolicyConfig(**ck["config"]))
     pol.load_state_dict(ck["state_dict"])

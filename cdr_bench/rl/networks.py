@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import asdict
+from typing import Any
 
 import torch
 from torch import nn
@@ -137,3 +139,31 @@ def frozen_copy(module: nn.Module) -> nn.Module:
     for p in tgt.parameters():
         p.requires_grad_(False)
     return tgt
+
+
+class LearnerParts:
+    """The parts of a :class:`~cdr_bench.rl.offpolicy.Learner` that follow from naming its
+    pieces: ``config`` (of ``cfg``), ``actor`` (the attribute named ``ACTOR``), no schedule, and
+    ``state_dict`` / ``load_state_dict`` over the modules and optimisers named in ``PARTS``."""
+
+    PARTS: tuple[str, ...] = ()
+    ACTOR: str = "net"
+    cfg: Any
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return asdict(self.cfg)
+
+    @property
+    def actor(self) -> nn.Module:
+        return getattr(self, self.ACTOR)
+
+    def schedule(self, step: int, stage: int | None) -> dict[str, float]:
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {name: getattr(self, name).state_dict() for name in self.PARTS}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for name in self.PARTS:
+            getattr(self, name).load_state_dict(state[name])

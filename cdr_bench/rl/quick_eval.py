@@ -1,5 +1,6 @@
-"""Quick batched evaluation on the simulator (for tuning; the official scorer is
-``cdr-bench evaluate``). Pure numpy: the policy is any ``act_batch(obs, masks) -> actions``."""
+"""Quick batched evaluation through :class:`~cdr_bench.vector_env.VectorEnv` (for tuning; the
+official scorer is ``cdr-bench evaluate``). Pure numpy: the policy is any
+``act_batch(obs, masks) -> actions`` of the ownship."""
 
 from __future__ import annotations
 
@@ -8,9 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.scenarios import load_scenario
-from cdr_bench.sim import Simulator, observe
 from cdr_bench.sim.core import LOS, NMAC, SUCCESS, TIMEOUT
+from cdr_bench.vector_env import VectorEnv
 
 ActBatch = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -19,36 +19,31 @@ def quick_eval(
     act_batch: ActBatch, scenario: str, episodes: int = 200, seed: int = 0, batch: int = 100
 ) -> dict[str, Any]:
     """Success / LoS / NMAC / timeout rates of the ownship over ``episodes`` episodes with
-    seeds ``seed .. seed + episodes - 1`` (LoS = at least one LoS in the episode)."""
-    cfg = load_scenario(scenario)
-    n_done, succ, los, nmac, tout, steps_succ = 0, 0, 0, 0, 0, []
+    seeds ``seed .. seed + episodes - 1`` (LoS = at least one LoS in the episode); other
+    controlled aircraft hold."""
+    out, had_los, steps = [], [], []
     for start in range(0, episodes, batch):
-        E = min(batch, episodes - start)
-        sim = Simulator(cfg, n_episodes=E)
-        sim.reset(np.arange(seed + start, seed + start + E))
-        had_los = np.zeros(E, bool)
-        while sim.ac_active.any():
-            obs = observe(sim)[:, 0]
-            masks = sim.action_masks()[:, 0]
-            flying = sim.ac_active[:, 0]
-            a = np.full(E, 13)
-            if flying.any():
-                a[flying] = act_batch(obs[flying], masks[flying])
-            res = sim.step(a[:, None])
-            had_los |= res.los_with[:, 0].any(-1)
-        out = sim.ac_outcome[:, 0]
-        n_done += E
-        succ += int((out == SUCCESS).sum())
-        los += int((had_los | (out == LOS)).sum())
-        nmac += int((out == NMAC).sum())
-        tout += int((out == TIMEOUT).sum())
-        steps_succ += list(sim.steps[out == SUCCESS])
+        env = VectorEnv(scenario, min(batch, episodes - start))
+        obs, masks = env.reset(seeds=np.arange(seed + start, seed + start + env.num_envs))
+        los = np.zeros(env.num_envs, bool)
+        while (flying := env.flying).any():
+            actions = np.full((env.num_envs, env.n_agents), 13)
+            own = flying[:, 0]
+            if own.any():
+                actions[own, 0] = act_batch(obs[own, 0], masks[own, 0])
+            st = env.step(actions)
+            obs, masks = st.obs, st.action_mask
+            los |= st.result.los_with[:, 0].any(-1)
+        out.append(env.sim.ac_outcome[:, 0].copy())
+        had_los.append(los)
+        steps.append(env.sim.steps.copy())
+    oc, hl, st_ = np.concatenate(out), np.concatenate(had_los), np.concatenate(steps)
     return {
         "scenario": scenario,
-        "episodes": n_done,
-        "success": succ / n_done,
-        "los": los / n_done,
-        "nmac": nmac / n_done,
-        "timeout": tout / n_done,
-        "steps_success": float(np.mean(steps_succ)) if steps_succ else float("nan"),
+        "episodes": len(oc),
+        "success": float(np.mean(oc == SUCCESS)),
+        "los": float(np.mean(hl | (oc == LOS))),
+        "nmac": float(np.mean(oc == NMAC)),
+        "timeout": float(np.mean(oc == TIMEOUT)),
+        "steps_success": float(np.mean(st_[oc == SUCCESS])) if (oc == SUCCESS).any() else np.nan,
     }

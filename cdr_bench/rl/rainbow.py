@@ -26,13 +26,14 @@ value and an advantage stream, each a noisy hidden layer of 128 and a noisy outp
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from cdr_bench.rl.networks import N_ACTIONS, frozen_copy, polyak_update
+from cdr_bench.rl.networks import N_ACTIONS, LearnerParts, frozen_copy, polyak_update
 
 
 class NoisyLinear(nn.Module):
@@ -161,14 +162,30 @@ class RainbowNet(nn.Module):
         return masked_argmax(self.q_values(obs), mask)
 
 
-class Rainbow:
-    """Online and target networks, Adam, and one update on a prioritised n-step batch."""
+class Rainbow(LearnerParts):
+    """Online and target networks, Adam, and one update on a prioritised n-step batch. A
+    :class:`~cdr_bench.rl.offpolicy.Learner` of the off-policy loop (no schedule: the noisy
+    nets explore)."""
 
-    def __init__(self, cfg: RainbowConfig, lr: float = 1e-4, adam_eps: float = 1.5e-4):
-        self.cfg = cfg
+    PARTS = ("net", "target", "opt")
+
+    def __init__(
+        self, cfg: RainbowConfig, lr: float = 1e-4, adam_eps: float = 1.5e-4, polyak: float = 5e-3
+    ):
+        self.cfg, self.polyak = cfg, polyak
         self.net = RainbowNet(cfg)
         self.target: RainbowNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.opt = torch.optim.Adam(self.net.parameters(), lr=lr, eps=adam_eps)
+        self.priorities = np.zeros(0, np.float32)
+        """per-sample priorities (cross-entropy) of the last update's batch"""
+
+    def act(self, obs: np.ndarray, mask: np.ndarray, explore: bool) -> np.ndarray:
+        """Exploring: a fresh noise sample, then the masked argmax of the noisy network; else
+        the masked argmax of the mean weights (noise off)."""
+        self.net.train(explore)
+        if explore:
+            self.net.reset_noise()
+        return self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
 
     @torch.no_grad()
     def target_distribution(
@@ -184,7 +201,7 @@ class Rainbow:
         p_next = self.target.log_probs(next_obs).exp()[torch.arange(len(a_star)), a_star]
         return project_distribution(p_next, reward, discount, self.net.support)
 
-    def update(self, b: dict[str, torch.Tensor], polyak: float) -> dict[str, float]:
+    def update(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
         """One gradient step; ``b`` from :meth:`PrioritizedReplayBuffer.sample` (as tensors).
         Returns the losses and ``priorities`` (per-sample cross-entropy) in ``self.priorities``."""
         self.net.reset_noise()
@@ -198,26 +215,9 @@ class Rainbow:
         loss.backward()
         nn.utils.clip_grad_norm_(self.net.parameters(), 10.0)
         self.opt.step()
-        polyak_update(self.target, self.net, polyak)
+        polyak_update(self.target, self.net, self.polyak)
         self.priorities = ce.detach().numpy()
         return {"loss_ce": float(loss.item())}
-
-    def state_dict(self) -> dict:
-        return {
-            "net": self.net.state_dict(),
-            "target": self.target.state_dict(),
-            "opt": self.opt.state_dict(),
-        }
-
-    def load_state_dict(self, st: dict) -> None:
-        self.net.load_state_dict(st["net"])
-        self.target.load_state_dict(st["target"])
-        self.opt.load_state_dict(st["opt"])
-
-
-def save_net(path: str, net: RainbowNet, meta: dict) -> None:
-    """Small inference checkpoint: config, parameters (no noise buffers), meta."""
-    torch.save({"config": asdict(net.cfg), "state_dict": net.state_dict(), "meta": meta}, path)
 
 
 def load_net(path: str) -> RainbowNet:

@@ -1,63 +1,80 @@
-"""Uniform replay buffer of (s, mask, a, r, s', mask', done) in preallocated numpy arrays."""
+"""Replay of the off-policy loop, in preallocated numpy arrays (pure numpy).
+
+A transition is one flying aircraft, one step: ``obs, mask, action, reward, goal_reward,
+safety_reward, next_obs, next_mask, done, discount`` (``reward`` = goal + safety part; Safe-DQN-X
+learns the parts apart; ``discount`` = gamma^k of an n-step transition).
+
+* :class:`ReplayBuffer` -- ring buffer, uniform sampling;
+* :class:`PrioritizedReplayBuffer` -- proportional prioritised sampling over a :class:`SumTree`;
+* :class:`NStepAccumulator` -- per-aircraft n-step returns in front of a buffer;
+* :class:`Replay` -- what the loop holds: an optional accumulator and one of the two buffers.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
+
+from cdr_bench.rl.common import linear_schedule
+
+Batch = dict[str, NDArray]
+
+REWARDS = ("reward", "goal_reward", "safety_reward")
 
 
 class ReplayBuffer:
     """Ring buffer; ``add`` takes a batch of transitions, ``sample`` draws uniformly."""
 
     def __init__(self, capacity: int, obs_dim: int, n_actions: int = 27):
-        self.capacity = int(capacity)
-        self.obs = np.zeros((self.capacity, obs_dim), np.float32)
-        self.next_obs = np.zeros((self.capacity, obs_dim), np.float32)
-        self.mask = np.zeros((self.capacity, n_actions), np.int8)
-        self.next_mask = np.zeros((self.capacity, n_actions), np.int8)
-        self.action = np.zeros(self.capacity, np.int64)
-        self.reward = np.zeros(self.capacity, np.float32)
-        self.done = np.zeros(self.capacity, np.float32)
+        self.capacity = c = int(capacity)
+        self.data: Batch = {
+            "obs": np.zeros((c, obs_dim), np.float32),
+            "mask": np.zeros((c, n_actions), np.int8),
+            "action": np.zeros(c, np.int64),
+            "reward": np.zeros(c, np.float32),
+            "goal_reward": np.zeros(c, np.float32),
+            "safety_reward": np.zeros(c, np.float32),
+            "next_obs": np.zeros((c, obs_dim), np.float32),
+            "next_mask": np.zeros((c, n_actions), np.int8),
+            "done": np.zeros(c, np.float32),
+            "discount": np.zeros(c, np.float32),
+        }
         self.pos = 0
         self.size = 0
 
     def __len__(self) -> int:
         return self.size
 
-    def add(self, obs, mask, action, reward, next_obs, next_mask, done) -> None:
-        """Append n transitions (arrays with leading dimension n), overwriting the oldest."""
-        n = len(action)
+    def add(self, tr: Mapping[str, Any]) -> NDArray[np.int64]:
+        """Append n transitions (columns with leading dimension n; a missing column is stored
+        as 0), overwriting the oldest; returns their slots."""
+        n = len(tr["action"])
         idx = (self.pos + np.arange(n)) % self.capacity
-        self.obs[idx], self.mask[idx], self.action[idx] = obs, mask, action
-        self.reward[idx], self.next_obs[idx] = reward, next_obs
-        self.next_mask[idx], self.done[idx] = next_mask, done
+        for k, col in self.data.items():
+            col[idx] = tr.get(k, 0)
         self.pos = int((self.pos + n) % self.capacity)
         self.size = min(self.size + n, self.capacity)
+        return idx
 
-    def sample(self, batch: int, rng: np.random.Generator) -> dict[str, NDArray]:
-        idx = rng.integers(0, self.size, batch)
-        return {
-            "obs": self.obs[idx],
-            "mask": self.mask[idx],
-            "action": self.action[idx],
-            "reward": self.reward[idx],
-            "next_obs": self.next_obs[idx],
-            "next_mask": self.next_mask[idx],
-            "done": self.done[idx],
-        }
+    def sample(self, batch: int, rng: np.random.Generator, beta: float = 0.4) -> Batch:
+        """``batch`` transitions drawn uniformly with replacement (``beta`` unused)."""
+        return self.rows(rng.integers(0, self.size, batch))
 
-    def state_dict(self) -> dict[str, NDArray | int]:
-        n = self.size
-        return {
-            "obs": self.obs[:n],
-            "next_obs": self.next_obs[:n],
-            "mask": self.mask[:n],
-            "next_mask": self.next_mask[:n],
-            "action": self.action[:n],
-            "reward": self.reward[:n],
-            "done": self.done[:n],
-            "pos": self.pos,
-        }
+    def rows(self, idx: NDArray[np.integer]) -> Batch:
+        return {k: col[idx] for k, col in self.data.items()}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"data": self.rows(np.arange(self.size)), "pos": self.pos}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        n = len(state["data"]["action"])
+        for k, col in self.data.items():
+            col[:n] = state["data"][k]
+        self.size, self.pos = n, state["pos"]
 
 
 class SumTree:
@@ -94,48 +111,32 @@ class SumTree:
 
 
 class PrioritizedReplayBuffer(ReplayBuffer):
-    """Proportional prioritised replay (Schaul et al. 2016) of n-step transitions.
+    """Proportional prioritised replay (Schaul et al. 2016).
 
-    Stores ``discount`` = gamma^k of each transition (k <= n steps actually summed into its
-    ``reward``). A new transition gets the largest priority seen so far. ``sample`` draws
-    index i with probability P(i) = p_i^alpha / sum_j p_j^alpha (stratified: one draw per
-    equal slice of the total) and returns importance weights w_i = (N P(i))^-beta / max_batch w.
+    A new transition gets the largest priority seen so far. ``sample`` draws index i with
+    probability P(i) = p_i^alpha / sum_j p_j^alpha (stratified: one draw per equal slice of the
+    total) and returns importance weights ``weight`` w_i = (N P(i))^-beta / max_batch w and the
+    drawn slots ``index``.
     """
 
     def __init__(self, capacity: int, obs_dim: int, alpha: float = 0.5, n_actions: int = 27):
         super().__init__(capacity, obs_dim, n_actions)
         self.alpha = alpha
-        self.discount = np.zeros(self.capacity, np.float32)
         self.tree = SumTree(self.capacity)
         self.max_priority = 1.0
 
-    def add(self, obs, mask, action, reward, next_obs, next_mask, done, discount=None) -> None:
-        n = len(action)
-        idx = (self.pos + np.arange(n)) % self.capacity
-        super().add(obs, mask, action, reward, next_obs, next_mask, done)
-        self.discount[idx] = 0.0 if discount is None else discount
-        self.tree.update(idx, np.full(n, self.max_priority**self.alpha))
+    def add(self, tr: Mapping[str, Any]) -> NDArray[np.int64]:
+        idx = super().add(tr)
+        self.tree.update(idx, np.full(len(idx), self.max_priority**self.alpha))
+        return idx
 
-    def sample(  # type: ignore[override]
-        self, batch: int, rng: np.random.Generator, beta: float = 0.4
-    ) -> dict[str, NDArray]:
+    def sample(self, batch: int, rng: np.random.Generator, beta: float = 0.4) -> Batch:
         total = self.tree.total
         prefix = (np.arange(batch) + rng.random(batch)) * (total / batch)
         idx = np.minimum(self.tree.find(np.minimum(prefix, total * (1 - 1e-12))), self.size - 1)
         prob = self.tree.tree[idx + self.tree.n_leaves] / total
         w = (self.size * prob) ** (-beta)
-        return {
-            "obs": self.obs[idx],
-            "mask": self.mask[idx],
-            "action": self.action[idx],
-            "reward": self.reward[idx],
-            "next_obs": self.next_obs[idx],
-            "next_mask": self.next_mask[idx],
-            "done": self.done[idx],
-            "discount": self.discount[idx],
-            "weight": (w / w.max()).astype(np.float32),
-            "index": idx,
-        }
+        return {**self.rows(idx), "weight": (w / w.max()).astype(np.float32), "index": idx}
 
     def update_priorities(self, idx: NDArray[np.integer], priority: NDArray[np.floating]) -> None:
         """Set the priorities p_i (before the exponent alpha) of the sampled transitions."""
@@ -143,76 +144,110 @@ class PrioritizedReplayBuffer(ReplayBuffer):
         self.max_priority = max(self.max_priority, float(p.max()))
         self.tree.update(idx, p**self.alpha)
 
+    def state_dict(self) -> dict[str, Any]:
+        return {**super().state_dict(), "tree": self.tree.tree, "max_priority": self.max_priority}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self.tree.tree[:] = state["tree"]
+        self.max_priority = state["max_priority"]
+
 
 class NStepAccumulator:
-    """Turns per-step transitions of ``n_envs`` parallel episodes (row e = episode e) into
-    n-step transitions (s_t, a_t, R = sum_{k<K} gamma^k r_{t+k}, s_{t+K}, done, gamma^K) with
-    K = n, or fewer when the episode ends first (then every pending transition is emitted)."""
+    """Turns per-step transitions of the aircraft in ``n_slots`` slots into n-step transitions
+    (s_t, a_t, R = sum_{k<K} gamma^k r_{t+k}, s_{t+K}, done, gamma^K) with K = n, or fewer when
+    the aircraft's flight ends first (then every pending transition of the slot is emitted).
+    Every reward column (``reward``, ``goal_reward``, ``safety_reward``) is summed alike."""
 
-    def __init__(self, n_envs: int, n: int, gamma: float):
+    def __init__(self, n_slots: int, n: int, gamma: float):
         self.n, self.gamma = n, gamma
-        self.pending: list[list[tuple]] = [[] for _ in range(n_envs)]
+        self.pending: list[list[tuple]] = [[] for _ in range(n_slots)]
 
-    def push(self, obs, mask, action, reward, next_obs, next_mask, done, ended) -> dict:
-        """One step of every episode (arrays with leading dimension n_envs); returns the
-        completed n-step transitions as arrays (possibly empty)."""
+    def push(self, slots: NDArray[np.integer], tr: Mapping[str, Any], ended) -> Batch:
+        """One step of the aircraft in ``slots`` (row i of every column is slot ``slots[i]``;
+        ``ended[i]``: its flight ended); returns the completed n-step transitions, in slot
+        order (possibly none)."""
         rows: list[tuple] = []
-        for e, q in enumerate(self.pending):
-            q.append((obs[e], mask[e], action[e], reward[e]))
+        for i, s in enumerate(slots):
+            q = self.pending[s]
+            q.append((tr["obs"][i], tr["mask"][i], tr["action"][i], *(tr[k][i] for k in REWARDS)))
             if len(q) == self.n:
-                rows.append(self._emit(q, next_obs[e], next_mask[e], done[e]))
+                rows.append(self._emit(q, tr, i))
                 q.pop(0)
-            if ended[e]:
+            if ended[i]:
                 while q:
-                    rows.append(self._emit(q, next_obs[e], next_mask[e], done[e]))
+                    rows.append(self._emit(q, tr, i))
                     q.pop(0)
+        keys = ("obs", "mask", "action", *REWARDS, "next_obs", "next_mask", "done", "discount")
         if not rows:
             return {"action": np.zeros(0, np.int64)}
-        cols = list(zip(*rows, strict=True))
-        keys = ("obs", "mask", "action", "reward", "next_obs", "next_mask", "done", "discount")
-        return {k: np.asarray(c) for k, c in zip(keys, cols, strict=True)}
+        return {k: np.asarray(c) for k, c in zip(keys, zip(*rows, strict=True), strict=True)}
 
-    def _emit(self, q: list[tuple], next_obs, next_mask, done) -> tuple:
-        ret = sum(self.gamma**k * r for k, (_, _, _, r) in enumerate(q))
-        s, m, a, _ = q[0]
-        return (
-            s,
-            m,
-            a,
-            np.float32(ret),
-            next_obs,
-            next_mask,
-            done,
-            np.float32(self.gamma ** len(q)),
+    def _emit(self, q: list[tuple], tr: Mapping[str, Any], i: int) -> tuple:
+        returns = [
+            np.float32(sum(self.gamma**k * step[3 + j] for k, step in enumerate(q)))
+            for j in range(len(REWARDS))
+        ]
+        s, m, a = q[0][:3]
+        nxt = (tr["next_obs"][i], tr["next_mask"][i], tr["done"][i])
+        return (s, m, a, *returns, *nxt, np.float32(self.gamma ** len(q)))
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """How an algorithm's transitions are stored and drawn."""
+
+    n_step: int = 1
+    """n of the n-step return (1: transitions as they come)"""
+    alpha: float | None = None
+    """prioritised replay exponent; None: uniform sampling"""
+    beta_start: float = 0.4
+    """prioritised replay: importance-sampling exponent at the start, annealed linearly to 1
+    at the end of the budget"""
+
+
+class Replay:
+    """The loop's replay: n-step returns (if ``n_step`` > 1) in front of a uniform or a
+    prioritised buffer."""
+
+    def __init__(self, cfg: ReplayConfig, capacity: int, obs_dim: int, n_slots: int, gamma: float):
+        self.cfg, self.gamma = cfg, gamma
+        self.prioritized = cfg.alpha is not None
+        self.buffer = (
+            PrioritizedReplayBuffer(capacity, obs_dim, cfg.alpha)
+            if cfg.alpha is not None
+            else ReplayBuffer(capacity, obs_dim)
         )
+        self.nstep = NStepAccumulator(n_slots, cfg.n_step, gamma) if cfg.n_step > 1 else None
 
+    def __len__(self) -> int:
+        return len(self.buffer)
 
-class SplitRewardReplayBuffer(ReplayBuffer):
-    """Uniform replay that keeps the goal part and the safety part of the reward apart
-    (Safe-DQN-X); ``reward`` holds their sum."""
+    def add(self, slots: NDArray[np.integer], tr: Batch, ended: NDArray[np.bool_]) -> None:
+        """One step's transitions (row i = the aircraft in slot ``slots[i]``)."""
+        if self.nstep is not None:
+            tr = self.nstep.push(slots, tr, ended)
+        else:
+            tr = {**tr, "discount": np.full(len(tr["action"]), self.gamma, np.float32)}
+        if len(tr["action"]):
+            self.buffer.add(tr)
 
-    def __init__(self, capacity: int, obs_dim: int, n_actions: int = 27):
-        super().__init__(capacity, obs_dim, n_actions)
-        self.goal_reward = np.zeros(self.capacity, np.float32)
-        self.safety_reward = np.zeros(self.capacity, np.float32)
+    def beta(self, step: int, total_steps: int) -> float:
+        """Prioritised replay's importance-sampling exponent after ``step`` transitions."""
+        return linear_schedule(self.cfg.beta_start, 1.0, total_steps, step)
 
-    def add_split(
-        self, obs, mask, action, goal_reward, safety_reward, next_obs, next_mask, done
-    ) -> None:
-        n = len(action)
-        idx = (self.pos + np.arange(n)) % self.capacity
-        self.add(obs, mask, action, goal_reward + safety_reward, next_obs, next_mask, done)
-        self.goal_reward[idx], self.safety_reward[idx] = goal_reward, safety_reward
+    def sample(self, batch: int, rng: np.random.Generator, beta: float) -> Batch:
+        return self.buffer.sample(batch, rng, beta)
 
-    def sample(self, batch: int, rng: np.random.Generator) -> dict[str, NDArray]:
-        idx = rng.integers(0, self.size, batch)
-        return {
-            "obs": self.obs[idx],
-            "mask": self.mask[idx],
-            "action": self.action[idx],
-            "goal_reward": self.goal_reward[idx],
-            "safety_reward": self.safety_reward[idx],
-            "next_obs": self.next_obs[idx],
-            "next_mask": self.next_mask[idx],
-            "done": self.done[idx],
-        }
+    def update_priorities(self, batch: Batch, priority: NDArray[np.floating]) -> None:
+        assert isinstance(self.buffer, PrioritizedReplayBuffer)
+        self.buffer.update_priorities(batch["index"], priority)
+
+    def state_dict(self) -> dict[str, Any]:
+        pending = self.nstep.pending if self.nstep is not None else None
+        return {"buffer": self.buffer.state_dict(), "pending": pending}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.buffer.load_state_dict(state["buffer"])
+        if self.nstep is not None:
+            self.nstep.pending = state["pending"]

@@ -24,13 +24,15 @@ target networks score it.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from cdr_bench.rl.networks import N_ACTIONS, frozen_copy, mlp, polyak_update
+from cdr_bench.rl.networks import N_ACTIONS, LearnerParts, frozen_copy, mlp, polyak_update
 
 RULES = ("sum", "lexicographic")
 
@@ -87,33 +89,66 @@ class SafeDQNNet(nn.Module):
         return combine(qs, qg, mask, self.cfg.rule, self.cfg.slack)
 
 
-class SafeDQN:
-    """Online and target networks, Adam, and one update of both components (Huber loss)."""
+class SafeDQN(LearnerParts):
+    """Online and target networks, Adam, and one update of both components (Huber loss). A
+    :class:`~cdr_bench.rl.offpolicy.Learner` of the off-policy loop.
 
-    def __init__(self, cfg: SafeDQNConfig, lr: float = 1e-4):
+    Exploration is epsilon-greedy over the feasible actions: with probability ``epsilon(step)``
+    a uniformly random feasible action (drawn from ``rng``), otherwise the combination rule.
+    Without ``epsilon`` it never explores.
+    """
+
+    PARTS = ("net", "target", "opt")
+
+    def __init__(
+        self,
+        cfg: SafeDQNConfig,
+        lr: float = 1e-4,
+        gamma: float = 0.99,
+        polyak: float = 5e-3,
+        epsilon: Callable[[int], float] | None = None,
+        rng: np.random.Generator | None = None,
+    ):
         self.net = SafeDQNNet(cfg)
         self.target: SafeDQNNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
-        self.cfg = cfg
+        self.cfg, self.gamma, self.polyak = cfg, gamma, polyak
+        self.epsilon_schedule, self.rng = epsilon, rng
+        self.epsilon = 0.0
+
+    def schedule(self, step: int, stage: int | None) -> dict[str, float]:
+        if self.epsilon_schedule is None:
+            return {}
+        self.epsilon = self.epsilon_schedule(step)
+        return {"epsilon": self.epsilon}
+
+    def act(self, obs: np.ndarray, mask: np.ndarray, explore: bool) -> np.ndarray:
+        actions = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
+        if explore and self.epsilon_schedule is not None:
+            assert self.rng is not None
+            rows = self.rng.random(len(actions)) < self.epsilon
+            if rows.any():
+                # A uniformly random feasible action: argmax of uniform noise over the feasible set.
+                noise = self.rng.random((int(rows.sum()), mask.shape[1]))
+                actions[rows] = np.where(mask[rows] > 0, noise, -1).argmax(axis=1)
+        return actions
 
     @torch.no_grad()
-    def targets(
-        self, b: dict[str, torch.Tensor], gamma: float
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    def targets(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """y_S = r_S + gamma (1 - done) Q_S'(s', a*), y_G likewise, a* = rule on the online
         networks over the next state's feasible actions."""
         qs_on, qg_on = self.net(b["next_obs"])
         a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)
         qs_t, qg_t = self.target(b["next_obs"])
         idx = torch.arange(len(a_star))
-        cont = gamma * (1.0 - b["done"])
+        cont = self.gamma * (1.0 - b["done"])
         return (
             b["safety_reward"] + cont * qs_t[idx, a_star],
             b["goal_reward"] + cont * qg_t[idx, a_star],
         )
 
-    def update(self, b: dict[str, torch.Tensor], gamma: float, polyak: float) -> dict[str, float]:
-        y_s, y_g = self.targets(b, gamma)
+    def update(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        y_s, y_g = self.targets(b)
         qs, qg = self.net(b["obs"])
         idx = torch.arange(len(b["action"]))
         loss_s = F.smooth_l1_loss(qs[idx, b["action"]], y_s)
@@ -122,24 +157,8 @@ class SafeDQN:
         (loss_s + loss_g).backward()
         nn.utils.clip_grad_norm_(self.net.parameters(), 10.0)
         self.opt.step()
-        polyak_update(self.target, self.net, polyak)
+        polyak_update(self.target, self.net, self.polyak)
         return {"loss_safety": float(loss_s.item()), "loss_goal": float(loss_g.item())}
-
-    def state_dict(self) -> dict:
-        return {
-            "net": self.net.state_dict(),
-            "target": self.target.state_dict(),
-            "opt": self.opt.state_dict(),
-        }
-
-    def load_state_dict(self, st: dict) -> None:
-        self.net.load_state_dict(st["net"])
-        self.target.load_state_dict(st["target"])
-        self.opt.load_state_dict(st["opt"])
-
-
-def save_net(path: str, net: SafeDQNNet, meta: dict) -> None:
-    torch.save({"config": asdict(net.cfg), "state_dict": net.state_dict(), "meta": meta}, path)
 
 
 def load_net(path: str) -> SafeDQNNet:

@@ -3,17 +3,21 @@
     cdr-bench train ppo --run-dir runs/ppo --total-steps 200000
     cdr-bench train maskable-ppo --run-dir runs/maskable-ppo --total-steps 200000
     cdr-bench train td3 --run-dir runs/td3 --total-steps 200000
+    python -m cdr_bench.rl.train_sb3 ppo --run-dir runs/ppo --total-steps 200000
 
-Same environment, observation and reward as Diffusion-AC: an SB3 ``VecEnv`` over the batched
-simulator with the DPSC curriculum, failure penalty 5 and the 200-step training cut
-(:mod:`cdr_bench.rl.sb3_vecenv`). Networks: three hidden layers of 128 (PPO: separate actor and
-critic, Tanh, clip 0.2, GAE 0.95; TD3: ReLU, continuous (a_psi, a_v, a_h) rounded to the discrete
-triple), gamma 0.99. PPO and TD3 are unmasked as in the paper (a masked level change is not
-executed by the env and counts as invalid); MaskablePPO masks in acting and in its loss.
+Same environment, observation and reward as Diffusion-AC: the SB3 ``VecEnv`` of
+:func:`cdr_bench.wrappers.vector_env_to_sb3` over the training environment
+(:class:`~cdr_bench.rl.curriculum.CurriculumEnv`: DPSC curriculum, failure penalty 5 and the
+200-step training cut; each controlled aircraft one slot). Networks: three hidden layers of 128
+(PPO: separate actor and critic, Tanh, clip 0.2, GAE 0.95; TD3: ReLU, continuous
+(a_psi, a_v, a_h) rounded to the discrete triple), gamma 0.99. PPO and TD3 are unmasked as in
+the paper (a masked level change is not executed by the env and counts as invalid); MaskablePPO
+masks in acting and in its loss.
 
-Outputs in ``run_dir``: ``log.jsonl``, ``state.zip`` + ``state.json`` (SB3 model for
-``--resume``; never shipped, SB3 zips unpickle on load), ``checkpoint.pt`` (the actor's weights,
-loaded by agents/<name>/agent.py with ``weights_only=True``), ``curve.png``, ``args.json``.
+Outputs in ``run_dir``: ``log.jsonl``, ``state.zip`` (the SB3 model) + ``state.pt`` (environment,
+random streams and counters; TD3 also ``replay.pkl``) for an exact ``--resume`` (never shipped:
+they unpickle on load), ``checkpoint.pt`` (the actor's weights, loaded by agents/<name>/agent.py
+with ``weights_only=True``), ``curve.png``, ``args.json``.
 """
 
 from __future__ import annotations
@@ -21,22 +25,21 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
+import sys
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from cdr_bench.rl.baselines import (
-    JsonlLog,
-    SplitTrainEnv,
-    add_dataclass_arguments,
+from cdr_bench.rl import common
+from cdr_bench.rl.common import (
+    RunLog,
     from_namespace,
-    outcome_charts,
-    plot_curve,
-    write_args,
+    quick_evaluation,
+    same_named,
+    training_env,
 )
-from cdr_bench.rl.vecenv import Curriculum
+from cdr_bench.rl.offpolicy import OffPolicyArgs
 
 ALGORITHMS = ("ppo", "maskable-ppo", "td3")
 TITLES = {"ppo": "PPO", "maskable-ppo": "MaskablePPO", "td3": "TD3"}
@@ -45,27 +48,18 @@ TITLES = {"ppo": "PPO", "maskable-ppo": "MaskablePPO", "td3": "TD3"}
 
 
 @dataclass
-class Args:
+class Args(OffPolicyArgs):
+    """The replay flags (``buffer_size`` .. ``polyak``) are TD3's; PPO and MaskablePPO ignore
+    them."""
+
     run_dir: str = "runs/sb3"
-    """directory for logs, checkpoints and the curve"""
-    seed: int = 1
-    """seed of torch, numpy and the episode-seed stream"""
-    total_steps: int = 200_000
-    """budget in environment transitions (one flying aircraft, one step)"""
-    max_wall_minutes: float = 0.0
-    """stop (and finish normally) after this wall time; 0 = no limit"""
     n_envs: int = 16
-    """parallel episodes in the batched simulator (SB3 sub-environments)"""
-    curriculum: bool = True
-    """DPSC on (stages 1..12) or off (train on ``scenario``)"""
-    scenario: str = "medium"
-    """training scenario without the curriculum"""
     width: int = 128
     """hidden width (three hidden layers)"""
-    gamma: float = 0.99
-    """discount"""
     lr: float = 3e-4
     """Adam step size (TD3: actor and critic)"""
+    action_noise: float = 0.1
+    """TD3: std of the Gaussian exploration noise on the [-1, 1] outputs"""
     n_steps: int = 128
     """PPO: rollout length per sub-environment"""
     ppo_batch_size: int = 256
@@ -78,38 +72,6 @@ class Args:
     """PPO: GAE lambda"""
     ent_coef: float = 0.0
     """PPO: entropy bonus coefficient"""
-    buffer_size: int = 1_000_000
-    """TD3: replay capacity"""
-    batch_size: int = 128
-    """TD3: mini-batch size"""
-    update_every: int = 4
-    """TD3: one gradient step per this many transitions"""
-    learning_starts: int = 5_000
-    """TD3: transitions collected before the first update"""
-    polyak: float = 5e-3
-    """TD3: target Polyak coefficient tau"""
-    action_noise: float = 0.1
-    """TD3: std of the Gaussian exploration noise on the [-1, 1] outputs"""
-    failure_penalty: float = 5.0
-    """training-only extra penalty when an episode ends in LoS/NMAC (as Diffusion-AC)"""
-    max_episode_steps: int = 200
-    """training-only episode cut (bootstrapped); 0 = scenario horizon"""
-    window: int = 100
-    """DPSC promotion window (episodes)"""
-    promote_at: float = 0.9
-    """DPSC promotion threshold on the rolling success rate"""
-    log_every: int = 10_000
-    """transitions between log lines"""
-    checkpoint_every: int = 50_000
-    """transitions between checkpoints"""
-    eval_episodes: int = 100
-    """episodes per density for the final quick evaluation (0 = skip)"""
-    resume: bool = False
-    """continue from run_dir/state.zip (TD3: with an empty replay buffer)"""
-    threads: int = 1
-    """torch intra-op threads"""
-    progress: bool = True
-    """show a tqdm progress bar"""
 
 
 def _algorithm_class(algorithm: str) -> Any:
@@ -132,149 +94,100 @@ def _new_model(algorithm: str, args: Args, venv: Any) -> Any:
     cls = _algorithm_class(algorithm)
     common = dict(gamma=args.gamma, learning_rate=args.lr, seed=args.seed, device="cpu", verbose=0)
     if algorithm in ("ppo", "maskable-ppo"):
-        arch = [args.width] * 3
-        return cls(
-            "MlpPolicy",
-            venv,
-            n_steps=args.n_steps,
-            batch_size=args.ppo_batch_size,
-            n_epochs=args.n_epochs,
-            clip_range=args.clip_range,
-            gae_lambda=args.gae_lambda,
-            ent_coef=args.ent_coef,
-            policy_kwargs=dict(net_arch=dict(pi=arch, vf=arch)),
-            **common,
-        )
+        arch = dict(pi=[args.width] * 3, vf=[args.width] * 3)
+        ppo = same_named(args, ("n_steps", "n_epochs", "clip_range", "gae_lambda", "ent_coef"))
+        kwargs = dict(batch_size=args.ppo_batch_size, policy_kwargs=dict(net_arch=arch), **ppo)
+        return cls("MlpPolicy", venv, **kwargs, **common)
     from stable_baselines3.common.noise import NormalActionNoise, VectorizedActionNoise
 
-    noise = VectorizedActionNoise(
-        NormalActionNoise(np.zeros(3), np.full(3, args.action_noise)), args.n_envs
-    )
-    return cls(
-        "MlpPolicy",
-        venv,
-        buffer_size=args.buffer_size,
-        batch_size=args.batch_size,
-        learning_starts=args.learning_starts,
-        tau=args.polyak,
-        train_freq=1,
-        gradient_steps=max(1, round(args.n_envs / args.update_every)),
-        action_noise=noise,
-        policy_kwargs=dict(net_arch=[args.width] * 3),
-        **common,
-    )
+    n = venv.num_envs
+    noise = NormalActionNoise(np.zeros(3), np.full(3, args.action_noise))
+    td3 = same_named(args, ("buffer_size", "batch_size", "learning_starts"), tau=args.polyak)
+    td3.update(train_freq=1, gradient_steps=max(1, round(n / args.update_every)))
+    td3.update(action_noise=VectorizedActionNoise(noise, n))
+    return cls("MlpPolicy", venv, policy_kwargs=dict(net_arch=[args.width] * 3), **td3, **common)
 
 
 def train(algorithm: str, args: Args) -> dict:
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from cdr_bench.rl.quick_eval import quick_eval
+    from cdr_bench.rl.baselines import continuous_to_index
     from cdr_bench.rl.sb3_policies import export_actor
-    from cdr_bench.rl.sb3_vecenv import BatchedVecEnv
+    from cdr_bench.wrappers import vector_env_to_sb3
 
     cls = _algorithm_class(algorithm)
-    os.makedirs(args.run_dir, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
 
-    env = SplitTrainEnv(
-        args.n_envs,
-        seed=args.seed,
-        scenario=args.scenario,
-        curriculum=Curriculum(args.window, args.promote_at) if args.curriculum else None,
-        failure_penalty=args.failure_penalty,
-        max_episode_steps=args.max_episode_steps,
+    td3 = algorithm == "td3"
+    env = training_env(args)
+    venv = vector_env_to_sb3(
+        env, include_mask=False, continuous_actions=continuous_to_index if td3 else None
     )
-    venv = BatchedVecEnv(env, continuous=algorithm == "td3")
     zip_path = os.path.join(args.run_dir, "state.zip")
-    side_path = os.path.join(args.run_dir, "state.json")
-    wall_before = 0.0
+    state_path = os.path.join(args.run_dir, "state.pt")
+    replay_path = os.path.join(args.run_dir, "replay.pkl")
+    saved: dict[str, Any] = {"log": None}
     if args.resume:
-        side = json.load(open(side_path))
-        if env.curriculum is not None:
-            env.curriculum.stage = side["stage"]
-            env._build()
-        env.rng = np.random.default_rng(side["rng_seed"])
-        wall_before = side["wall_s"]
-        model = cls.load(zip_path, env=venv, device="cpu")
+        saved = torch.load(state_path, map_location="cpu", weights_only=False)
+        env.load_state_dict(saved["env"])
+        # load() re-seeds every generator (restored below) and must not restart the episodes.
+        model = cls.load(zip_path, env=venv, device="cpu", force_reset=False)
+        venv.load_state_dict(saved["venv"])
+        venv.seed(None)
+        if td3:
+            model.load_replay_buffer(replay_path)
+        np.random.set_state(saved["numpy_rng"])  # noqa: NPY002 - SB3 draws from the global one
+        torch.set_rng_state(saved["torch_rng"])
+        model.action_space.np_random.bit_generator.state = saved["action_space_rng"]
     else:
         model = _new_model(algorithm, args, venv)
-    log = JsonlLog(args.run_dir, args.resume)
-    write_args(args.run_dir, args, algorithm=algorithm)
-    kind = "td3" if algorithm == "td3" else "ppo"
-    t0 = time.time()
+    log = RunLog(args, algorithm, saved["log"])
+    kind = "td3" if td3 else "ppo"
+
+    losses: dict[str, float] = saved.get("losses", {})  # of the last update, as SB3 logs them
+
+    def read_losses() -> None:
+        for k, v in model.logger.name_to_value.items():
+            if k.startswith("train/") and "loss" in k:
+                losses["losses/" + k.split("/", 1)[1]] = float(v)
 
     def save() -> None:
-        wall = wall_before + time.time() - t0
+        read_losses()
         model.save(zip_path)
-        side = {
-            "step": int(model.num_timesteps),
-            "wall_s": wall,
-            "stage": env.curriculum.stage if env.curriculum else 0,
-            "rng_seed": int(env.rng.integers(0, 2**31)),
+        if td3:
+            model.save_replay_buffer(replay_path)
+        state = {
+            "env": env.state_dict(),
+            "venv": venv.state_dict(),
+            "log": log.state_dict(int(model.num_timesteps)),
+            "numpy_rng": np.random.get_state(),  # noqa: NPY002
+            "torch_rng": torch.get_rng_state(),
+            "action_space_rng": model.action_space.np_random.bit_generator.state,
+            "losses": losses,
         }
-        with open(side_path, "w") as f:
-            json.dump(side, f)
-        meta = {"step": int(model.num_timesteps), "wall_s": round(wall, 1), "algorithm": algorithm}
+        torch.save(state, state_path + ".tmp")
+        os.replace(state_path + ".tmp", state_path)
+        meta = {
+            "step": int(model.num_timesteps),
+            "wall_s": round(log.wall(), 1),
+            "algorithm": algorithm,
+        }
         export_actor(model, kind, os.path.join(args.run_dir, "checkpoint.pt"), meta)
 
     class Progress(BaseCallback):
-        """Progress bar, JSONL log lines, periodic checkpoints and the wall-time limit."""
-
-        def _on_training_start(self) -> None:
-            self.pbar = None
-            if args.progress:
-                from tqdm import tqdm
-
-                self.pbar = tqdm(
-                    total=args.total_steps,
-                    initial=int(self.model.num_timesteps),
-                    unit="step",
-                    dynamic_ncols=True,
-                )
-            self.last_log = self.last_ckpt = int(self.model.num_timesteps)
+        """Log lines, checkpoints and the wall-time limit, after every vector step."""
 
         def _on_step(self) -> bool:
             step = int(self.model.num_timesteps)
-            if self.pbar is not None:
-                self.pbar.update(venv.num_envs)
-            for stage in venv.promotions:
-                log.write(
-                    {
-                        "step": step,
-                        "curriculum/promoted_to": stage,
-                        "wall_s": wall_before + time.time() - t0,
-                    }
-                )
-            venv.promotions.clear()
-            if step - self.last_log >= args.log_every:
-                self.last_log = step
-                rec = {
-                    "step": step,
-                    "wall_s": round(wall_before + time.time() - t0, 1),
-                    "curriculum/stage": env.curriculum.stage if env.curriculum else 0,
-                    "charts/success_rolling": env.success_rate(),
-                    "charts/episodes": env.episodes,
-                    **outcome_charts(venv.finished),
-                }
-                for k, v in self.model.logger.name_to_value.items():
-                    if k.startswith("train/") and "loss" in k:
-                        rec["losses/" + k.split("/", 1)[1]] = float(v)
-                log.write(rec)
-                venv.finished.clear()
-                if self.pbar is not None:
-                    self.pbar.set_postfix(
-                        stage=rec["curriculum/stage"], succ=f"{rec['charts/success_rolling']:.2f}"
-                    )
-            if step - self.last_ckpt >= args.checkpoint_every:
-                self.last_ckpt = step
+            log.advance(step, venv.num_envs, env)
+            if log.log_due(step):
+                read_losses()
+                log.interval(step, env, env.take_outcomes(), **losses)
+            if log.checkpoint_due(step):
                 save()
-            return not (args.max_wall_minutes and time.time() - t0 > 60 * args.max_wall_minutes)
-
-        def _on_training_end(self) -> None:
-            if self.pbar is not None:
-                self.pbar.close()
+            return not log.out_of_time()
 
     remaining = max(0, args.total_steps - int(model.num_timesteps))
     if remaining:
@@ -282,15 +195,13 @@ def train(algorithm: str, args: Args) -> dict:
             remaining, callback=Progress(), log_interval=None, reset_num_timesteps=not args.resume
         )
     save()
-    wall = wall_before + time.time() - t0
 
     summary: dict = {
         "step": int(model.num_timesteps),
-        "wall_s": round(wall, 1),
-        "stage": env.curriculum.stage if env.curriculum else 0,
+        "wall_s": round(log.wall(), 1),
+        "stage": env.stage or 0,
     }
     if args.eval_episodes:
-        from cdr_bench.rl.baselines import continuous_to_index
         from cdr_bench.rl.sb3_policies import load_actor
 
         net, _ = load_actor(os.path.join(args.run_dir, "checkpoint.pt"))
@@ -298,34 +209,38 @@ def train(algorithm: str, args: Args) -> dict:
         def act_batch(o: np.ndarray, m: np.ndarray) -> np.ndarray:
             with torch.no_grad():
                 out = net(torch.from_numpy(o))
-            if kind == "td3":
+            if td3:
                 return continuous_to_index(out.numpy())
             if algorithm == "maskable-ppo":
                 out = out.masked_fill(torch.from_numpy(m) == 0, -torch.inf)
             return out.argmax(1).numpy()
 
-        for sc in ("low", "medium", "high"):
-            summary[f"eval/{sc}"] = quick_eval(act_batch, sc, args.eval_episodes, seed=10_000)
-    log.write({"final": summary})
-    try:
-        plot_curve(log.path, os.path.join(args.run_dir, "curve.png"), TITLES[algorithm])
-    except Exception as e:  # plotting must never lose a finished run
-        print(f"curve not written: {e}")
-    return summary
+        summary.update(quick_evaluation(act_batch, args.eval_episodes))
+    return log.finish(summary, TITLES[algorithm])
 
 
-def add_arguments(p: argparse.ArgumentParser, algorithm: str) -> None:
-    add_dataclass_arguments(p, Args, run_dir=f"runs/{algorithm}")
+def add_arguments(p: argparse.ArgumentParser, name: str | None = None) -> None:
+    """The flags of ``cdr-bench train NAME`` for NAME in :data:`ALGORITHMS`."""
+    common.add_arguments(p, Args, run_dir=f"runs/{name or 'sb3'}")
+    if name is not None:
+        p.set_defaults(algorithm=name)
 
 
-def run(algorithm: str, ns: argparse.Namespace) -> dict:
-    return train(algorithm, from_namespace(Args, ns))
+def run(ns: argparse.Namespace) -> dict:
+    """Entry point of ``cdr-bench train ppo|maskable-ppo|td3`` (``ns.algorithm``)."""
+    return train(ns.algorithm, from_namespace(Args, ns))
 
 
-def main(algorithm: str, doc: str | None, argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        description=doc, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    add_arguments(p, algorithm)
-    print(json.dumps(run(algorithm, p.parse_args(argv)), indent=1))
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] not in ALGORITHMS:
+        print(f"usage: python -m cdr_bench.rl.train_sb3 {{{','.join(ALGORITHMS)}}} [flags]")
+        return 2
+    p = argparse.ArgumentParser(description=__doc__, prog=f"train_sb3 {argv[0]}")
+    add_arguments(p, argv[0])
+    print(json.dumps(run(p.parse_args(argv[1:])), indent=1))
     return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -76,28 +76,54 @@ def test_noisy_layer_factorised_noise_and_eval_mode():
 
 def test_n_step_return_by_hand():
     g = 0.9
-    acc = NStepAccumulator(n_envs=1, n=3, gamma=g)
+    acc = NStepAccumulator(n_slots=2, n=3, gamma=g)
     o = np.arange(6, dtype=np.float32)[:, None]  # obs of steps 0..5
     m = np.ones((1, 27), np.int8)
     out = []
     rewards = [1.0, 2.0, 3.0, 4.0]
     done = [0, 0, 0, 1]
     for t, r in enumerate(rewards):
-        res = acc.push(
-            o[t : t + 1], m, np.array([t]), np.array([r], np.float32), o[t + 1 : t + 2], m,
-            np.array([done[t]], np.float32), np.array([bool(done[t])]),
-        )  # fmt: skip
-        out.append(res)
+        tr = {
+            "obs": o[t : t + 1], "mask": m, "action": np.array([t]),
+            "reward": np.array([r], np.float32), "goal_reward": np.array([r], np.float32),
+            "safety_reward": np.zeros(1, np.float32), "next_obs": o[t + 1 : t + 2],
+            "next_mask": m, "done": np.array([done[t]], np.float32),
+        }  # fmt: skip
+        out.append(acc.push(np.array([1]), tr, np.array([bool(done[t])])))
     assert [len(x["action"]) for x in out] == [0, 0, 1, 3]
+    assert acc.pending == [[], []]  # slot 1 flushed at the end of its flight, slot 0 unused
     first = out[2]
     assert first["action"][0] == 0 and first["next_obs"][0, 0] == 3
     assert np.isclose(first["reward"][0], 1 + g * 2 + g * g * 3)
+    assert first["goal_reward"][0] == first["reward"][0] and first["safety_reward"][0] == 0
     assert np.isclose(first["discount"][0], g**3) and first["done"][0] == 0
     last = out[3]  # the episode terminated: the three pending transitions are flushed
     assert list(last["action"]) == [1, 2, 3]
     assert np.allclose(last["reward"], [2 + g * 3 + g * g * 4, 3 + g * 4, 4])
     assert np.allclose(last["discount"], [g**3, g**2, g])
     assert (last["done"] == 1).all() and (last["next_obs"][:, 0] == 4).all()
+
+
+def test_n_step_slots_are_independent():
+    """Two aircraft in one step: each slot keeps its own queue; rows come out in slot order."""
+    acc = NStepAccumulator(n_slots=3, n=2, gamma=0.5)
+    m = np.ones((2, 27), np.int8)
+
+    def step(t, ended):
+        tr = {
+            "obs": np.array([[t], [10 + t]], np.float32), "mask": m,
+            "action": np.array([t, 10 + t]),
+            "reward": np.array([1.0, 2.0], np.float32), "goal_reward": np.zeros(2, np.float32),
+            "safety_reward": np.zeros(2, np.float32), "next_obs": np.array([[t + 1], [11 + t]]),
+            "next_mask": m, "done": np.zeros(2, np.float32),
+        }  # fmt: skip
+        return acc.push(np.array([0, 2]), tr, np.array(ended))
+
+    assert len(step(0, [False, False])["action"]) == 0
+    out = step(1, [False, True])
+    assert list(out["action"]) == [0, 10, 11]  # slot 0 (n = 2 reached), then slot 2 flushed
+    assert np.allclose(out["reward"], [1.5, 3.0, 2.0])
+    assert len(acc.pending[0]) == 1 and acc.pending[2] == []
 
 
 def test_sum_tree_and_prioritised_sampling_weights():
@@ -111,7 +137,8 @@ def test_sum_tree_and_prioritised_sampling_weights():
     buf = PrioritizedReplayBuffer(8, obs_dim=1, alpha=1.0)
     z = np.zeros((4, 1), np.float32)
     k = np.ones((4, 27), np.int8)
-    buf.add(z, k, np.arange(4), np.zeros(4), z, k, np.zeros(4), np.full(4, 0.9))
+    tr = {"obs": z, "mask": k, "action": np.arange(4), "next_obs": z, "next_mask": k}
+    buf.add({**tr, "discount": np.full(4, 0.9)})
     buf.update_priorities(np.arange(4), np.array([1.0, 1.0, 2.0, 4.0]))
     rng = np.random.default_rng(0)
     idx = np.concatenate([buf.sample(64, rng)["index"] for _ in range(200)])
@@ -127,7 +154,7 @@ def test_sum_tree_and_prioritised_sampling_weights():
         assert np.isclose(w, expected[int(i)], rtol=1e-5)
     assert np.allclose(b["discount"], 0.9)
     # A new transition gets the largest priority so far (alpha = 1: 4 / total 12).
-    buf.add(z[:1], k[:1], np.array([9]), np.zeros(1), z[:1], k[:1], np.zeros(1), np.ones(1))
+    buf.add({k_: v[:1] for k_, v in tr.items()})
     assert buf.tree.tree[buf.tree.n_leaves + 4] == 4.0
 
 
@@ -173,7 +200,8 @@ def test_double_q_target_uses_online_argmax_over_next_mask():
 
 def test_update_decreases_loss_on_a_fixed_batch():
     torch.manual_seed(0)
-    learner = Rainbow(RainbowConfig(obs_dim=3, width=32, n_atoms=11, v_min=-2, v_max=2), lr=1e-3)
+    cfg = RainbowConfig(obs_dim=3, width=32, n_atoms=11, v_min=-2, v_max=2)
+    learner = Rainbow(cfg, lr=1e-3, polyak=0.0)
     n = 64
     b = {
         "obs": torch.randn(n, 3),
@@ -186,8 +214,8 @@ def test_update_decreases_loss_on_a_fixed_batch():
         "discount": torch.full((n,), 0.97),
         "weight": torch.ones(n),
     }
-    first = learner.update(b, polyak=0.0)["loss_ce"]
+    first = learner.update(b)["loss_ce"]
     for _ in range(100):
-        last = learner.update(b, polyak=0.0)["loss_ce"]
+        last = learner.update(b)["loss_ce"]
     assert last < first - 0.1
     assert learner.priorities.shape == (n,) and (learner.priorities > 0).all()

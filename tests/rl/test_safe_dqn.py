@@ -1,5 +1,5 @@
-"""Safe-DQN-X: the combination rules by hand, masks in acting and in the targets, the split
-reward of the training env, and TD3's rounding map."""
+"""Safe-DQN-X: the combination rules by hand, masks in acting and in the targets, epsilon-greedy
+exploration, and TD3's rounding map."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from cdr_bench.actions import TRIPLES, encode  # noqa: E402
-from cdr_bench.rl.baselines import SplitTrainEnv, continuous_to_index  # noqa: E402
+from cdr_bench.rl.baselines import continuous_to_index  # noqa: E402
 from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig, combine  # noqa: E402
 
 
@@ -46,10 +46,16 @@ def test_lexicographic_rule_by_hand():
         combine(qs, qg, mask, "max")
 
 
+def test_trainer_rule_names_match_the_learner():
+    from cdr_bench.rl import safe_dqn, train_safe_dqn
+
+    assert train_safe_dqn.RULES == safe_dqn.RULES
+
+
 @pytest.mark.parametrize("rule", ["sum", "lexicographic"])
 def test_masks_in_acting_and_targets(rule):
     torch.manual_seed(0)
-    learner = SafeDQN(SafeDQNConfig(obs_dim=3, width=16, rule=rule, slack=0.05))
+    learner = SafeDQN(SafeDQNConfig(obs_dim=3, width=16, rule=rule, slack=0.05), gamma=0.9)
     obs = torch.randn(128, 3)
     free = learner.net.act(obs, torch.ones(128, 27, dtype=torch.int8))
     mask = torch.ones(128, 27, dtype=torch.int8)
@@ -67,29 +73,32 @@ def test_masks_in_acting_and_targets(rule):
     }
     for p in learner.target.parameters():
         p.data += 0.3 * torch.randn_like(p)  # target differs from online
-    y_s, y_g = learner.targets(b, gamma=0.9)
+    y_s, y_g = learner.targets(b)
     qs_t, qg_t = learner.target(obs)
     assert torch.allclose(y_s, -0.5 + 0.9 * qs_t[torch.arange(128), a])
     assert torch.allclose(y_g, -0.1 + 0.9 * qg_t[torch.arange(128), a])
     b["done"] = torch.ones(128)
-    y_s, y_g = learner.targets(b, gamma=0.9)
+    y_s, y_g = learner.targets(b)
     assert torch.allclose(y_s, torch.full((128,), -0.5))
 
 
-def test_split_train_env_rewards_add_up_and_episodes_end():
-    env = SplitTrainEnv(8, seed=0, scenario="high", failure_penalty=5.0, max_episode_steps=30)
-    ended_total, failures = 0, 0
-    rng = np.random.default_rng(0)
-    for _ in range(40):
-        obs, mask, flying = env.observe()
-        assert flying.all()
-        tr = env.step(rng.integers(0, 27, len(flying)))
-        assert np.allclose(tr["goal_reward"] + tr["safety_reward"], tr["reward"], atol=1e-5)
-        assert (tr["done"][~tr["ended"]] == 0).all()  # a terminal step always ends the episode
-        assert len(tr["finished"]) == int(tr["ended"].sum())
-        ended_total += int(tr["ended"].sum())
-        failures += int((tr["safety_reward"] <= -5).sum())
-    assert ended_total >= 8  # the 30-step cut ends every episode at least once
+def test_epsilon_greedy_explores_feasible_actions_only():
+    from cdr_bench.rl.train_safe_dqn import Args, build
+
+    torch.manual_seed(0)
+    args = Args(total_steps=1000, eps_start=1.0, eps_end=0.0, eps_fraction=0.5, width=16)
+    learner = build(args, 3, np.random.default_rng(0))
+    obs = np.random.default_rng(1).normal(size=(4000, 3)).astype(np.float32)
+    mask = np.ones((4000, 27), np.int8)
+    mask[:, 2::3] = 0  # no climb
+    greedy = learner.act(obs, mask, explore=False)
+    assert learner.schedule(0, None) == {"epsilon": 1.0}
+    a = learner.act(obs, mask, explore=True)
+    assert (mask[np.arange(4000), a] == 1).all() and len(np.unique(a)) == 18  # uniform, feasible
+    assert learner.schedule(250, None) == {"epsilon": 0.5}
+    assert 0.4 < np.mean(learner.act(obs, mask, explore=True) != greedy) < 0.6
+    assert learner.schedule(600, 3) == {"epsilon": 0.0}  # annealed after half the budget
+    assert (learner.act(obs, mask, explore=True) == greedy).all()
 
 
 def test_td3_rounding_map_by_hand():
