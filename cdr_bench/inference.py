@@ -306,20 +306,39 @@ def _linear(x, w, b, out):  # pragma: no cover - compiled
 
 @njit(**_JIT)
 def _normalise(x, out):  # pragma: no cover - compiled
-    """LayerNorm without affine: (x - mean) / sqrt(var + eps), moments summed in float64."""
+    """LayerNorm without affine: (x - mean) / sqrt(var + eps). Moments in float64, each sum as
+    four interleaved sequential partial sums (elements j = 0, 4, 8, ... in the first, ...)
+    added as (s0 + s1) + (s2 + s3): a fixed order with four independent chains."""
     N, J = x.shape
+    J4 = J - J % 4
     for n in range(N):
-        s = 0.0
+        xn = x[n]
+        s0 = s1 = s2 = s3 = 0.0
+        for j in range(0, J4, 4):
+            s0 += xn[j]
+            s1 += xn[j + 1]
+            s2 += xn[j + 2]
+            s3 += xn[j + 3]
+        for j in range(J4, J):
+            s0 += xn[j]
+        mean = ((s0 + s1) + (s2 + s3)) / J
+        v0 = v1 = v2 = v3 = 0.0
+        for j in range(0, J4, 4):
+            d0 = xn[j] - mean
+            d1 = xn[j + 1] - mean
+            d2 = xn[j + 2] - mean
+            d3 = xn[j + 3] - mean
+            v0 += d0 * d0
+            v1 += d1 * d1
+            v2 += d2 * d2
+            v3 += d3 * d3
+        for j in range(J4, J):
+            d0 = xn[j] - mean
+            v0 += d0 * d0
+        inv = 1.0 / math.sqrt(((v0 + v1) + (v2 + v3)) / J + LN_EPS)
+        on = out[n]
         for j in range(J):
-            s += x[n, j]
-        mean = s / J
-        v = 0.0
-        for j in range(J):
-            d = x[n, j] - mean
-            v += d * d
-        inv = 1.0 / math.sqrt(v / J + LN_EPS)
-        for j in range(J):
-            out[n, j] = (x[n, j] - mean) * inv
+            on[j] = (xn[j] - mean) * inv
 
 
 @njit(**_JIT)
@@ -333,21 +352,23 @@ def _affine(x, g, b):  # pragma: no cover - compiled
 
 @njit(**_JIT)
 def _mish_rows(x):  # pragma: no cover - compiled
-    """Mish in place on a C-contiguous float32 array (float64 inside, chunks of _CHUNK)."""
+    """Mish in place on a C-contiguous float32 array, as :func:`_vmish` (float64 inside, chunks
+    of ``_CHUNK`` elements)."""
     flat = x.reshape(x.size)
     size = flat.shape[0]
-    b = np.empty(_CHUNK)
-    o = np.empty(_CHUNK)
-    t1 = np.empty(_CHUNK)
-    t2 = np.empty(_CHUNK)
-    t3 = np.empty(_CHUNK)
+    a = np.empty(_CHUNK)
+    e = np.empty(_CHUNK)
+    t = np.empty(_CHUNK)
     for s in range(0, size, _CHUNK):
         m = min(_CHUNK, size - s)
         for j in range(m):
-            b[j] = flat[s + j]
-        _vmish(b, o, t1, t2, t3, m)
+            v = flat[s + j]
+            a[j] = 20.0 if v > 20.0 else v
+        _vexp(a, e, t, m)
         for j in range(m):
-            flat[s + j] = o[j]
+            ej = e[j]
+            nj = ej * (ej + 2.0)
+            flat[s + j] = flat[s + j] * nj / (nj + 2.0)
 
 
 @njit(**_JIT)
@@ -784,6 +805,79 @@ def _categorical_logits(
 
 
 @njit(**_JIT)
+def _split_heads(qkv, n_heads):  # pragma: no cover - compiled
+    """(N, 3W) q|k|v rows -> (N, 2, D, H) float64 q and k with the head index last (a layout
+    in which the per-head dot products vectorise across heads)."""
+    N = qkv.shape[0]
+    W = qkv.shape[1] // 3
+    D = W // n_heads
+    out = np.empty((N, 2, D, n_heads))
+    for n in range(N):
+        for a in range(2):
+            for hd in range(n_heads):
+                for d in range(D):
+                    out[n, a, d, hd] = qkv[n, a * W + hd * D + d]
+    return out
+
+
+@njit(**_JIT)
+def _attention(h_qk, h_qkv, t_qkv, y_qkv, n_heads, o):  # pragma: no cover - compiled
+    """Multi-head attention over the three tokens (state, step, noisy logits), its outputs
+    summed over the three queries: o[n] = sum_j (sum_i softmax_j(q_i . k_j / sqrt D)) v_j per
+    head, before the output projection. Dot products in float64 (products of float32 are
+    exact), summed over d in order; softmax and weights in float64."""
+    N = y_qkv.shape[0]
+    W = y_qkv.shape[1] // 3
+    H = n_heads
+    D = W // H
+    scale = 1.0 / math.sqrt(D)
+    t_qk = _split_heads(t_qkv.reshape(1, 3 * W), H)[0]
+    y_qk = np.empty((1, 2, D, H))
+    acc = np.empty(H)
+    sc = np.empty(9 * H)  # [(i * 3 + j) * H + hd]
+    ex = np.empty(9 * H)
+    tmp = np.empty(9 * H)
+    for n in range(N):
+        for a in range(2):
+            for hd in range(H):
+                for d in range(D):
+                    y_qk[0, a, d, hd] = y_qkv[n, a * W + hd * D + d]
+        toks = (h_qk[n], t_qk, y_qk[0])
+        for i in range(3):  # query token
+            q = toks[i][0]
+            for j in range(3):  # key token
+                k = toks[j][1]
+                for hd in range(H):
+                    acc[hd] = 0.0
+                for d in range(D):
+                    for hd in range(H):
+                        acc[hd] += q[d, hd] * k[d, hd]
+                for hd in range(H):
+                    sc[(i * 3 + j) * H + hd] = acc[hd] * scale
+        for i in range(3):  # softmax over the keys: subtract each row's maximum
+            for hd in range(H):
+                r0 = (i * 3) * H + hd
+                m = max(sc[r0], max(sc[r0 + H], sc[r0 + 2 * H]))
+                sc[r0] -= m
+                sc[r0 + H] -= m
+                sc[r0 + 2 * H] -= m
+        _vexp(sc, ex, tmp, 9 * H)
+        for hd in range(H):
+            p0 = 0.0
+            p1 = 0.0
+            p2 = 0.0
+            for i in range(3):  # attention weights summed over the three queries
+                r0 = (i * 3) * H + hd
+                tot = (ex[r0] + ex[r0 + H]) + ex[r0 + 2 * H]
+                p0 += ex[r0] / tot
+                p1 += ex[r0 + H] / tot
+                p2 += ex[r0 + 2 * H] / tot
+            for d in range(D):
+                c = 2 * W + hd * D + d
+                o[n, hd * D + d] = (p0 * h_qkv[n, c] + p1 * t_qkv[c]) + p2 * y_qkv[n, c]
+
+
+@njit(**_JIT)
 def _diffusion_logits(
     obs,
     noise,
@@ -821,8 +915,6 @@ def _diffusion_logits(
     N = obs.shape[0]
     T = noise.shape[0]
     W = e1w.shape[1]
-    D = W // n_heads
-    scale = 1.0 / math.sqrt(D)
     h = _encode(obs, e1w, e1b, e1g, e1beta, e2w, e2b, e2g, e2beta)  # Enc(s), (N, W)
     nh = np.empty((N, W), np.float32)
     _normalise(h, nh)
@@ -836,51 +928,14 @@ def _diffusion_logits(
     o = np.empty((N, W), np.float32)
     attn = np.empty((N, W), np.float32)
     x = np.empty((N, W), np.float32)
-    tok = np.empty((3, 3 * W), np.float32)
-    sc = np.empty(9 * n_heads)
-    sc_tmp = np.empty(9 * n_heads)
-    ex = np.empty(9 * n_heads)
+    h_qk = _split_heads(h_qkv, n_heads)  # the state token's q and k, once per decision
     for t in range(T, 0, -1):
         _linear(y, y1w, y1b, y1)
         _mish_rows(y1)
         _linear(y1, y2w, y2b, ye)
         _normalise(ye, nye)
         _linear(nye, qkv_w, qkv_b, y_qkv)
-        tq = te_qkv[t]
-        for n in range(N):
-            for c in range(3 * W):  # the three tokens' q/k/v: state, step, logits
-                tok[0, c] = h_qkv[n, c]
-                tok[1, c] = tq[c]
-                tok[2, c] = y_qkv[n, c]
-            for hd in range(n_heads):
-                base = hd * D
-                for i in range(3):  # query token i
-                    for j in range(3):  # key token j
-                        acc = 0.0
-                        for d in range(D):
-                            acc += tok[i, base + d] * tok[j, W + base + d]
-                        sc[(hd * 3 + i) * 3 + j] = acc * scale
-                for i in range(3):  # softmax over the keys: subtract the row maximum
-                    r = (hd * 3 + i) * 3
-                    m = max(sc[r], max(sc[r + 1], sc[r + 2]))
-                    sc[r] -= m
-                    sc[r + 1] -= m
-                    sc[r + 2] -= m
-            _vexp(sc, ex, sc_tmp, 9 * n_heads)
-            for hd in range(n_heads):
-                base = hd * D
-                p0 = 0.0
-                p1 = 0.0
-                p2 = 0.0
-                for i in range(3):  # attention weights summed over the three queries
-                    r = (hd * 3 + i) * 3
-                    tot = (ex[r] + ex[r + 1]) + ex[r + 2]
-                    p0 += ex[r] / tot
-                    p1 += ex[r + 1] / tot
-                    p2 += ex[r + 2] / tot
-                for d in range(D):
-                    c = 2 * W + base + d
-                    o[n, base + d] = (p0 * tok[0, c] + p1 * tok[1, c]) + p2 * tok[2, c]
+        _attention(h_qk, h_qkv, te_qkv[t], y_qkv, n_heads, o)
         _linear(o, out_w, out_b3, attn)
         tet = te[t]
         for n in range(N):
