@@ -10,6 +10,7 @@ import pytest
 
 pytest.importorskip("ray")
 
+import cdr_bench.scale.ray_eval  # noqa: E402, F401  (registers the evaluator's 'ray' backend)
 from cdr_bench.errors import UserError  # noqa: E402
 from cdr_bench.evaluate.api import evaluate, resolve_jobs  # noqa: E402
 from cdr_bench.scale.config import load_sweep  # noqa: E402
