@@ -306,36 +306,20 @@ def _linear(x, w, b, out):  # pragma: no cover - compiled
 
 @njit(**_JIT)
 def _normalise(x, out):  # pragma: no cover - compiled
-    """LayerNorm without affine: (x - mean) / sqrt(var + eps). Moments in float64, each sum as
-    four interleaved sequential partial sums (elements j = 0, 4, 8, ... in the first, ...)
-    added as (s0 + s1) + (s2 + s3): a fixed order with four independent chains."""
+    """LayerNorm without affine: (x - mean) / sqrt(var + eps), each moment one sequential
+    float64 sum over j."""
     N, J = x.shape
-    J4 = J - J % 4
     for n in range(N):
         xn = x[n]
-        s0 = s1 = s2 = s3 = 0.0
-        for j in range(0, J4, 4):
-            s0 += xn[j]
-            s1 += xn[j + 1]
-            s2 += xn[j + 2]
-            s3 += xn[j + 3]
-        for j in range(J4, J):
-            s0 += xn[j]
-        mean = ((s0 + s1) + (s2 + s3)) / J
-        v0 = v1 = v2 = v3 = 0.0
-        for j in range(0, J4, 4):
-            d0 = xn[j] - mean
-            d1 = xn[j + 1] - mean
-            d2 = xn[j + 2] - mean
-            d3 = xn[j + 3] - mean
-            v0 += d0 * d0
-            v1 += d1 * d1
-            v2 += d2 * d2
-            v3 += d3 * d3
-        for j in range(J4, J):
-            d0 = xn[j] - mean
-            v0 += d0 * d0
-        inv = 1.0 / math.sqrt(((v0 + v1) + (v2 + v3)) / J + LN_EPS)
+        s = 0.0
+        for j in range(J):
+            s += xn[j]
+        mean = s / J
+        v = 0.0
+        for j in range(J):
+            d = xn[j] - mean
+            v += d * d
+        inv = 1.0 / math.sqrt(v / J + LN_EPS)
         on = out[n]
         for j in range(J):
             on[j] = (xn[j] - mean) * inv
@@ -806,12 +790,12 @@ def _categorical_logits(
 
 @njit(**_JIT)
 def _split_heads(qkv, n_heads):  # pragma: no cover - compiled
-    """(N, 3W) q|k|v rows -> (N, 2, D, H) float64 q and k with the head index last (a layout
-    in which the per-head dot products vectorise across heads)."""
+    """(N, 3W) q|k|v rows -> (N, 2, D, H) q and k with the head index last (a layout in which
+    the per-head dot products vectorise across heads)."""
     N = qkv.shape[0]
     W = qkv.shape[1] // 3
     D = W // n_heads
-    out = np.empty((N, 2, D, n_heads))
+    out = np.empty((N, 2, D, n_heads), np.float32)
     for n in range(N):
         for a in range(2):
             for hd in range(n_heads):
@@ -824,15 +808,15 @@ def _split_heads(qkv, n_heads):  # pragma: no cover - compiled
 def _attention(h_qk, h_qkv, t_qkv, y_qkv, n_heads, o):  # pragma: no cover - compiled
     """Multi-head attention over the three tokens (state, step, noisy logits), its outputs
     summed over the three queries: o[n] = sum_j (sum_i softmax_j(q_i . k_j / sqrt D)) v_j per
-    head, before the output projection. Dot products in float64 (products of float32 are
-    exact), summed over d in order; softmax and weights in float64."""
+    head, before the output projection. Dot products: float32 products summed over d in order
+    in float64; softmax and weights in float64."""
     N = y_qkv.shape[0]
     W = y_qkv.shape[1] // 3
     H = n_heads
     D = W // H
     scale = 1.0 / math.sqrt(D)
     t_qk = _split_heads(t_qkv.reshape(1, 3 * W), H)[0]
-    y_qk = np.empty((1, 2, D, H))
+    y_qk = np.empty((1, 2, D, H), np.float32)
     acc = np.empty(H)
     sc = np.empty(9 * H)  # [(i * 3 + j) * H + hd]
     ex = np.empty(9 * H)

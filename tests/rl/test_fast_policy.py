@@ -387,7 +387,7 @@ def test_rows_do_not_depend_on_the_batch():
 
 
 GOLDEN = {
-    "diffusion": "01bbed4015749823",
+    "diffusion": "ba53a7d9b493382f",
     "categorical": "c8b630ec24b667d2",
     "ppo": "7b5f658da6a961f4",
     "rainbow": "91572fab8f1c22fc",
