@@ -8,6 +8,9 @@
 * ``build --check``: re-evaluate every submission into a scratch folder and compare with the
   committed result files, then re-render from the committed results and compare with the
   committed pages; exit code 1 and a readable diff if anything differs. Writes nothing.
+  Submissions run side by side (``--workers`` at a time, one process each: no timing is
+  compared, so they may share the cores). CI checks a fixed sample, the first batch of every
+  scenario (``--check --episodes 200``); plain ``--check`` re-runs every committed episode.
 
 All-or-nothing: everything is produced in a scratch folder inside the leaderboard folder; only
 when every submission succeeded and every page rendered are the files moved into place (renames
@@ -247,8 +250,20 @@ def untracked_agent_files(sub: Submission, root: Path) -> list[str]:
 
 
 def _evaluate_all(
-    subs: list[Submission], opts: Options, root: Path, out_dir: Path, scratch: Path, n: int
+    subs: list[Submission],
+    opts: Options,
+    root: Path,
+    out_dir: Path,
+    scratch: Path,
+    n: int,
+    side_by_side: bool = False,
 ) -> None:
+    """Evaluate ``subs`` one after the other, each with ``opts.workers`` processes; or, with
+    ``side_by_side`` (``--check``), ``opts.workers`` submissions at a time with one process
+    each. Results do not depend on how batches are spread over processes; side by side keeps
+    every core busy through each submission's serial parts (start-up, safe load,
+    multimodality runs) but lets the submissions share the cores, so it is used only where no
+    timing is kept (``--check`` compares no latency)."""
     for sub in subs:
         loose = untracked_agent_files(sub, root)
         if loose:
@@ -257,18 +272,40 @@ def _evaluate_all(
                 f"({', '.join(loose)}); commit them, or `--check` on a clean clone will fail"
             )
     _, iso = network_isolation()
+    parallel = max(1, opts.workers) if side_by_side else 1
+    per_sub = 1 if side_by_side else opts.workers
+    how = (
+        f"{parallel} submission(s) at a time, 1 worker each"
+        if side_by_side
+        else f"{opts.workers} worker(s)"
+    )
     log(
-        f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {opts.workers} "
-        f"worker(s); limits: {opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per "
-        f"process, {opts.limits.wall_s:g} s wall; {iso}"
+        f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {how}; limits: "
+        f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per process, "
+        f"{opts.limits.wall_s:g} s wall; {iso}"
     )
     t0 = time.perf_counter()
-    for sub in subs:
-        wall = evaluate_submission(
-            sub, root, out_dir, scratch / sub.name, n, opts.workers, opts.limits
-        )
+
+    def one(sub: Submission) -> None:
+        wall = evaluate_submission(sub, root, out_dir, scratch / sub.name, n, per_sub, opts.limits)
         eps = n * len(sub.scenarios)
         log(f"  {sub.name}: {eps} episodes in {wall:.1f} s ({eps / max(wall, 1e-9):.0f} ep/s)")
+
+    if parallel == 1:
+        for sub in subs:
+            one(sub)
+    else:
+        from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+
+        with ThreadPoolExecutor(parallel) as pool:
+            futures = [pool.submit(one, sub) for sub in subs]
+            _, pending = wait(futures, return_when=FIRST_EXCEPTION)
+            for f in pending:
+                f.cancel()  # a failure stops the queue (running ones finish)
+            for f in futures:
+                exc = f.exception() if f.done() and not f.cancelled() else None
+                if exc is not None:
+                    raise exc
     log(f"evaluation finished in {time.perf_counter() - t0:.1f} s")
 
 
@@ -522,7 +559,7 @@ def _check(
     with staging(lb_dir) as stage:
         fresh = stage / "results"
         fresh.mkdir()
-        _evaluate_all(chosen, opts, root, fresh, stage / "scratch", n)
+        _evaluate_all(chosen, opts, root, fresh, stage / "scratch", n, side_by_side=True)
         for sub in chosen:
             committed = result_path(results_dir, sub.name)
             if not committed.exists():
