@@ -13,22 +13,27 @@ is fixed by IEEE 754 alone:
 * **only correctly rounded operations**: ``+ - * /`` and ``sqrt`` on float32/float64 give one
   result on every CPU (SSE2, AVX2, AVX-512 alike). Nothing else is used at inference;
 * **matrix products** are numba loops in a fixed order, ``out[n, j] = sum_k x[n, k] w[k, j]``
-  accumulated in float32 over k = 0, 1, ... (the "axpy" form: rows outer, k, then j innermost).
-  LLVM vectorises the j loop -- independent outputs side by side -- and never the sum itself,
-  so 4-, 8- or 16-lane code computes the same bits as scalar code;
-* **no FMA, no reassociation**: numba's ``fastmath`` is off (``tests/rl/test_fast_policy.py``
-  checks the generated assembly for ``vfmadd``; LLVM does not contract ``a * b + c`` without
-  it). Sums (LayerNorm moments, attention, softmax) run sequentially in float64;
+  accumulated in float32 over k = 0, 1, ... (the "axpy" form: rows outer, k, then j innermost;
+  four rows and four k share a pass over memory, which changes no sum). LLVM vectorises the j
+  loop -- independent outputs side by side -- and never the sum itself, so 4-, 8- or 16-lane
+  code computes the same bits as scalar code;
+* **no FMA, no reassociation**: numba's ``fastmath`` is off, so LLVM neither contracts
+  ``a * b + c`` into one fused multiply-add nor reorders a sum
+  (``tests/leaderboard/test_cpu_independence.py`` compiles every kernel afresh and finds no
+  ``vfmadd``-family instruction in the machine code). Sums (LayerNorm moments, attention,
+  softmax) run sequentially in float64;
 * **elementwise functions from basic operations**: ``exp``, ``expm1``, ``tanh``, Mish, ``sin``
   and ``cos`` are implemented here (range reduction + fixed polynomial, ~1e-16 relative
   error) instead of calling libm or numpy's ufuncs, both of which are CPU-dispatched;
 * **no BLAS anywhere**, including load time: LayerNorm folding and the step-token table are
   computed with the same kernels, the diffusion schedule with the functions above;
 * **random numbers** (the diffusion noise) come from ``numpy.random.Generator(PCG64(seed))``,
-  seeded by the agent's ``reset``: PCG64 and numpy's ziggurat are scalar integer/float code,
-  not dispatched per CPU (its rare tail/wedge branches call libm ``log1p``/``exp``; a last-bit
-  difference there would have to survive rounding to float32 -- probability ~1e-9 per tail
-  draw -- or land exactly on a rejection boundary).
+  seeded by the agent's ``reset``, as float32 standard normals: PCG64 and numpy's ziggurat are
+  scalar integer/float code, not dispatched per CPU. Its rare branches call libm: ``expf`` in
+  the wedge test (a comparison; a CPU-dependent last bit would have to meet the boundary
+  exactly, ~1e-14 per draw) and ``log1pf`` in the tail (no CPU-dispatched variant in glibc).
+  numpy does not promise ``Generator``'s algorithms across versions (NEP 19): the "noise"
+  golden digest in ``tests/rl/test_fast_policy.py`` fails if an upgrade changes the stream.
 
 The results equal the PyTorch modules' to float rounding (different summation order): the
 same action except on near ties (``tests/rl/test_fast_policy.py``), and the same bits under
