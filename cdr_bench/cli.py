@@ -54,6 +54,9 @@ def register(sub: Any) -> None:
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--max-frames", type=int, default=400)
     r.add_argument("--fps", type=int, default=8)
+    from cdr_bench.evaluate.cli import add_agent_args
+
+    add_agent_args(r)
     r.set_defaults(func=_render)
 
 
@@ -111,14 +114,22 @@ def _render(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".gif":
         raise UserError(f"--out {args.out}: expected a .gif path")
     env = CDREnv(args.scenario, render_mode="rgb_array")
-    policy = None
+    policy: Any = None
     if args.agent is not None:
-        from cdr_bench.evaluate.loader import load_agent  # the agent protocol of cdr-bench
+        from cdr_bench.evaluate.cli import agent_options
+        from cdr_bench.evaluate.remote import AgentFault
+        from cdr_bench.evaluate.runner import fault_message, load_for
 
-        agent = load_agent(
-            args.agent, env.observation_space("ownship_0"), env.action_space("ownship_0")
-        )
-        policy = agent.act
+        agent = load_for(args.agent, env.config, agent_options(args, args.agent))
+
+        def act(o: dict[str, Any]) -> int:
+            try:
+                return int(agent.act_batch(o["observation"][None], o["action_mask"][None])[0])
+            except AgentFault as f:
+                raise UserError(fault_message(f, agent, f"{args.scenario!r}")) from None
+
+        policy = act
+
     obs, _ = env.reset(seed=args.seed)
     frames: list[Any] = [env.render()]
     while env.agents and len(frames) < args.max_frames:

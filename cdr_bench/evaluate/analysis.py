@@ -17,9 +17,10 @@ import numpy as np
 
 from cdr_bench.actions import HOLD, decode
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.loader import load_agent
+from cdr_bench.evaluate.cli import add_agent_args, agent_options
+from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
 from cdr_bench.evaluate.results import atomic_write_text
-from cdr_bench.evaluate.runner import spaces_for
+from cdr_bench.evaluate.runner import close_all, fault_message, load_for
 from cdr_bench.scenarios import load_scenario
 from cdr_bench.sim.core import SUCCESS
 from cdr_bench.vector_env import VectorEnv
@@ -39,6 +40,7 @@ def register(sub: Any) -> None:
     )
     mm.add_argument("--threshold", type=float, default=0.05, help="mass threshold of a mode")
     mm.add_argument("--out", default=None, help="JSON results file (and a .png heat map beside it)")
+    add_agent_args(mm)
     mm.set_defaults(func=cmd_multimodal)
 
     la = sub.add_parser("latency", help="decision latency (median / p99 ms) per batch size")
@@ -55,25 +57,20 @@ def register(sub: Any) -> None:
     la.add_argument("--scenario", default="medium")
     la.add_argument("--threads", type=int, default=1)
     la.add_argument("--out", default=None)
+    add_agent_args(la)
     la.set_defaults(func=cmd_latency)
 
 
-def _load(agent: str, scenario: str = "medium"):
-    """The agent at ``agent`` (a folder with agent.py or a .py file), constructed with the
-    observation and action spaces of ``scenario`` as the evaluator does, so that any protocol
-    agent loads (classical agents read the spaces). Every failure is a one-line UserError."""
-    err = UserError
+def _load(agent: str, scenario: str, options: AgentOptions) -> RemoteAgent:
+    """The agent at ``agent`` in its own process, constructed with the observation and action
+    spaces of ``scenario`` as the evaluator does. Every failure is a one-line UserError."""
     try:
-        obs_space, act_space = spaces_for(load_scenario(scenario))
-    except Exception as e:
-        raise err(f"scenario {scenario!r}: {e}") from None
-    try:
-        return load_agent(agent, obs_space, act_space)
-    except err:
+        config = load_scenario(scenario)
+    except UserError:
         raise
-    except Exception as e:  # anything the loader did not already turn into a UserError
-        msg = str(e).splitlines()[0] if str(e) else ""
-        raise err(f"agent {agent}: {type(e).__name__}: {msg}") from None
+    except Exception as e:
+        raise UserError(f"scenario {scenario!r}: {e}") from None
+    return load_for(agent, config, options)
 
 
 def _check_scenario(name: str) -> None:
@@ -84,7 +81,7 @@ def _check_scenario(name: str) -> None:
 
 
 def first_action_distribution(
-    agent: Any, scenario: str, samples: int, seed: int = 0, max_steps: int = 0
+    agent: RemoteAgent, scenario: str, samples: int, seed: int = 0, max_steps: int = 0
 ) -> dict[str, Any]:
     """Sample the first action ``samples`` times from the scenario's start (one batched call, so
     every row draws its own noise), then validate each by a follow-on rollout with the same
@@ -94,7 +91,10 @@ def first_action_distribution(
     if any, hold."""
     env = VectorEnv(scenario, num_envs=samples)
     obs, masks = env.reset(seeds=np.full(samples, seed))
-    agent.reset(seed)
+    try:
+        agent.reset(seed)
+    except AgentFault as f:
+        raise UserError(fault_message(f, agent, f"reset(seed) on {scenario!r}")) from None
     first = None
     t = 0
     act = np.full((samples, env.n_agents), HOLD, dtype=np.int64)
@@ -102,7 +102,10 @@ def first_action_distribution(
     while flying.any() and not (max_steps and t >= max_steps):
         t += 1
         act[:, 0] = HOLD
-        act[flying, 0] = np.asarray(agent.act_batch(obs[flying, 0], masks[flying, 0]), np.int64)
+        try:
+            act[flying, 0] = agent.act_batch(obs[flying, 0], masks[flying, 0])
+        except AgentFault as f:
+            raise UserError(fault_message(f, agent, f"{scenario!r}, step {t}")) from None
         if first is None:
             first = act[:, 0].copy()
         out = env.step(act)
@@ -191,44 +194,64 @@ def heatmap(
         plt.close(fig)
 
 
-def cmd_multimodal(ns: argparse.Namespace) -> int:
-    err = UserError
-    if ns.samples < 1:
-        raise err("--samples must be >= 1")
-    _check_scenario(ns.scenario)
-    agent = _load(ns.agent, ns.scenario)
-    d = first_action_distribution(agent, ns.scenario, ns.samples, ns.seed, ns.max_steps)
-    summ = mode_summary(d["success"], ns.threshold)
+def multimodal(
+    agent_path: str,
+    scenario: str,
+    samples: int,
+    seed: int,
+    options: AgentOptions,
+    max_steps: int = 0,
+    threshold: float = 0.05,
+    out: str | os.PathLike[str] | None = None,
+) -> dict[str, Any]:
+    """First-action distribution, its modes and (with ``out``) the JSON and heat map files."""
+    if samples < 1:
+        raise UserError("--samples must be >= 1")
+    _check_scenario(scenario)
+    try:
+        agent = _load(agent_path, scenario, options)
+        d = first_action_distribution(agent, scenario, samples, seed, max_steps)
+    finally:
+        close_all()
+    summ = mode_summary(d["success"], threshold)
     res = {
-        "agent": str(ns.agent),
-        "scenario": ns.scenario,
-        "samples": ns.samples,
-        "seed": ns.seed,
-        "threshold": ns.threshold,
+        "agent": str(agent_path),
+        "scenario": scenario,
+        "samples": samples,
+        "seed": seed,
+        "threshold": threshold,
         **d,
         **summ,
     }
-    print(
-        f"{ns.scenario}: {ns.samples} samples, follow-on success {d['success_rate']:.3f}, "
-        f"{summ['modes']} mode(s) >= {ns.threshold:.0%}, normalised entropy "
-        f"{summ['normalised_entropy']:.3f}"
-    )
-    for a in np.flatnonzero(d["all"]):
-        print(
-            f"  action {a:2d} {decode(int(a))}: sampled {d['all'][a]:5d}, "
-            f"successful {d['success'][a]:5d}"
-        )
-    if ns.out:
-        out = Path(ns.out)
+    if out is not None:
+        o = Path(out)
         # PNG first, JSON last: a JSON file means the run finished and its picture is there.
         heatmap(
             d["success"],
-            f"{Path(str(ns.agent)).name} on {ns.scenario}: {ns.samples} samples, "
+            f"{Path(str(agent_path)).name} on {scenario}: {samples} samples, "
             f"follow-on success {100 * d['success_rate']:.1f} %",
-            out.with_suffix(".png"),
+            o.with_suffix(".png"),
             all_counts=d["all"],
         )
-        atomic_write_text(out, json.dumps(res, indent=1) + "\n")
+        atomic_write_text(o, json.dumps(res, indent=1) + "\n")
+    return res
+
+
+def cmd_multimodal(ns: argparse.Namespace) -> int:
+    options = agent_options(ns, ns.agent)
+    res = multimodal(
+        ns.agent, ns.scenario, ns.samples, ns.seed, options, ns.max_steps, ns.threshold, ns.out
+    )
+    print(
+        f"{ns.scenario}: {ns.samples} samples, follow-on success {res['success_rate']:.3f}, "
+        f"{res['modes']} mode(s) >= {ns.threshold:.0%}, normalised entropy "
+        f"{res['normalised_entropy']:.3f}"
+    )
+    for a in np.flatnonzero(res["all"]):
+        print(
+            f"  action {a:2d} {decode(int(a))}: sampled {res['all'][a]:5d}, "
+            f"successful {res['success'][a]:5d}"
+        )
     return 0
 
 
@@ -246,7 +269,7 @@ def cmd_latency(ns: argparse.Namespace) -> int:
     if min(sizes) < 1 or ns.decisions < 1 or ns.min_calls < 1 or ns.warmup < 0:
         raise err("--batch-sizes, --decisions and --min-calls must be >= 1, --warmup >= 0")
     _check_scenario(ns.scenario)
-    agent = _load(ns.agent)
+    agent = _load(ns.agent, ns.scenario, agent_options(ns, ns.agent))
     env = VectorEnv(ns.scenario, num_envs=max(sizes))
     all_obs, all_masks = env.reset(seeds=np.arange(max(sizes)))
     obs, masks = all_obs[:, 0], all_masks[:, 0]
@@ -255,14 +278,18 @@ def cmd_latency(ns: argparse.Namespace) -> int:
     print("|---:|---:|---:|---:|---:|---:|")
     for n in sizes:
         o, m = obs[:n], masks[:n]
-        for _ in range(ns.warmup):
-            agent.act_batch(o, m)
         calls = max(ns.min_calls, math.ceil(ns.decisions / n))
         ts = np.empty(calls)
-        for i in range(calls):
-            t0 = time.perf_counter()
-            agent.act_batch(o, m)
-            ts[i] = (time.perf_counter() - t0) * 1e3
+        try:
+            for _ in range(ns.warmup):
+                agent.act_batch(o, m)
+            for i in range(calls):
+                t0 = time.perf_counter()
+                agent.act_batch(o, m)
+                ts[i] = (time.perf_counter() - t0) * 1e3
+        except AgentFault as f:
+            close_all()
+            raise UserError(fault_message(f, agent, f"a batch of {n} on {ns.scenario!r}")) from None
         med, p99 = float(np.median(ts)), float(np.percentile(ts, 99))
         rows.append(
             {
@@ -275,6 +302,7 @@ def cmd_latency(ns: argparse.Namespace) -> int:
             }
         )
         print(f"| {n} | {calls} | {calls * n} | {med:.3f} | {p99:.3f} | {med / n:.4f} |")
+    close_all()
     if ns.out:
         res = {"agent": str(ns.agent), "scenario": ns.scenario, "threads": ns.threads, "rows": rows}
         atomic_write_text(Path(ns.out), json.dumps(res, indent=1) + "\n")

@@ -7,6 +7,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,12 +16,8 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate import results as rf
 from cdr_bench.evaluate.loader import AgentError, agent_identity
 from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
-from cdr_bench.evaluate.runner import (
-    DEFAULT_BATCH_SIZE,
-    DEFAULT_DECISION_TIMEOUT_S,
-    load_for,
-    run_batch_task,
-)
+from cdr_bench.evaluate.remote import AgentOptions, check_timeout
+from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE, close_all, load_for, run_batch_task
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig, list_scenarios, load_scenario
 
@@ -116,7 +113,7 @@ def evaluate(
     workers: int = 1,
     resume: bool = False,
     batch_size: int = DEFAULT_BATCH_SIZE,
-    decision_timeout_s: float = DEFAULT_DECISION_TIMEOUT_S,
+    agent_options: AgentOptions | None = None,
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
@@ -125,7 +122,8 @@ def evaluate(
 
     ``backend`` runs the episode batches in ``workers`` local processes (``"local"``) or as Ray
     tasks (``"ray"``: a local Ray with ``workers`` CPUs, or the cluster at ``address``); the
-    result is the same either way, only ``timing`` differs.
+    result is the same either way, only ``timing`` differs. The agent runs in its own process
+    (one per worker), confined when ``agent_options.confinement`` is set (:mod:`.remote`).
 
     Raises :class:`AgentError` (nothing written, checkpoint removed) when the agent cannot be
     loaded or misbehaves; an interruption leaves only the checkpoint ``<out>.partial.jsonl``.
@@ -141,10 +139,15 @@ def evaluate(
         raise UserError("--address needs --backend ray")
     if batch_size < 1:
         raise UserError(f"--batch-size must be >= 1, got {batch_size}")
+    options = agent_options or AgentOptions()
+    check_timeout("--decision-timeout", options.decision_timeout_s)
+    check_timeout("--load-timeout", options.load_timeout_s)
     identity = agent_identity(agent_path)
     agent_file = str(Path(agent_path).resolve())
-    for job in jobs:  # load errors now, in this process, before any work
-        load_for(agent_file, job.config)
+    for job in jobs:  # load errors now, before any work
+        load_for(agent_file, job.config, options)
+    if workers > 1 or backend != "local":
+        close_all()  # the workers start their own agent processes
 
     versions = rf.package_versions()
     scen_keys = [
@@ -179,9 +182,7 @@ def evaluate(
     for j in jobs:
         for k in range(math.ceil(j.episodes / batch_size)):
             if (j.config.id, k) not in done:
-                tasks.append(
-                    (agent_file, j.config, base_seed, k, batch_size, j.episodes, decision_timeout_s)
-                )
+                tasks.append((agent_file, j.config, base_seed, k, batch_size, j.episodes, options))
     total = sum(j.episodes for j in jobs)
     already = sum(len(b["episodes"]) for b in done.values())
     bar = _progress(total, already, identity["name"], progress)
@@ -195,6 +196,13 @@ def evaluate(
         bar.close()
         log.remove()
         raise
+    except BrokenProcessPool:
+        bar.close()
+        log.remove()
+        raise AgentError(
+            f"agent {identity['name']}: a worker process died (the agent process can only kill "
+            "itself; this is a fault of the evaluator or of the machine: out of memory?)"
+        ) from None
     except KeyboardInterrupt:
         bar.close()
         print(
@@ -203,6 +211,8 @@ def evaluate(
             file=sys.stderr,
         )
         raise
+    finally:
+        close_all()
     bar.close()
     wall = time.perf_counter() - t0
 
@@ -250,7 +260,8 @@ def evaluate(
             "workers": workers,
             "backend": backend,
             "resumed": bool(already),
-            "decision_timeout_s": decision_timeout_s,
+            "decision_timeout_s": options.decision_timeout_s,
+            "confined": options.confinement is not None,
             "decision_latency": latency,
         },
     }

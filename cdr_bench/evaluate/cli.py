@@ -50,13 +50,7 @@ def register(sub: Any) -> None:
         default=None,
         help="episodes stepped in lock-step per batch (200); part of the result key",
     )
-    p.add_argument(
-        "--decision-timeout",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help="time limit of one decision call (10 s)",
-    )
+    add_agent_args(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
 
@@ -79,15 +73,76 @@ def register(sub: Any) -> None:
     r.set_defaults(func=_report)
 
 
+def add_agent_args(p: argparse.ArgumentParser) -> None:
+    """The options of the agent's process (shared by every command that runs an agent)."""
+    p.add_argument(
+        "--decision-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="time limit of one decision call, enforced from outside the agent's process (10 s)",
+    )
+    p.add_argument(
+        "--load-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="time limit of importing and constructing the agent (300 s)",
+    )
+    p.add_argument(
+        "--sandbox",
+        action="store_true",
+        help="confine the agent's process with bubblewrap: read-only view of the current "
+        "folder, private scratch, no network, CPU and memory limits (for agents you do not "
+        "trust; the agent always runs in its own process)",
+    )
+
+
+def agent_options(args: argparse.Namespace, agent: str) -> Any:
+    """The :class:`~cdr_bench.evaluate.remote.AgentOptions` of :func:`add_agent_args`."""
+    from cdr_bench.evaluate.loader import resolve_agent_path
+    from cdr_bench.evaluate.remote import (
+        DEFAULT_DECISION_TIMEOUT_S,
+        DEFAULT_LOAD_TIMEOUT_S,
+        AgentOptions,
+        check_timeout,
+    )
+    from cdr_bench.evaluate.sandbox import Confinement, Limits, isolation
+
+    decision = (
+        DEFAULT_DECISION_TIMEOUT_S if args.decision_timeout is None else args.decision_timeout
+    )
+    load = DEFAULT_LOAD_TIMEOUT_S if args.load_timeout is None else args.load_timeout
+    check_timeout("--decision-timeout", decision)
+    check_timeout("--load-timeout", load)
+    confinement = limits = None
+    if args.sandbox:
+        view = Path.cwd().resolve()
+        f = resolve_agent_path(agent)
+        if not f.is_relative_to(view):
+            raise UserError(
+                f"--sandbox: the agent {agent} is outside the current folder {view}, the only "
+                "folder the sandbox lets it read; run from a folder that holds it"
+            )
+        limits = Limits()
+        confinement = Confinement(view=str(view), limits=limits)
+        _, how = isolation()
+        print(f"cdr-bench: sandbox: {how}", file=sys.stderr)
+    return AgentOptions(
+        confinement=confinement, limits=limits, load_timeout_s=load, decision_timeout_s=decision
+    )
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
     from cdr_bench.evaluate.report import summary_text
-    from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE, DEFAULT_DECISION_TIMEOUT_S
+    from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
 
     suite = args.suite if (args.suite or args.scenario) else "paper"
     jobs, notes = resolve_jobs(args.scenario, suite, args.episodes)
     for n in notes:
         print(f"cdr-bench: note: {n}", file=sys.stderr)
+    options = agent_options(args, args.agent)
     out = Path(args.out) if args.out else default_out(args.agent, jobs, suite)
     result = evaluate(
         args.agent,
@@ -98,9 +153,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         resume=args.resume,
         batch_size=args.batch_size or DEFAULT_BATCH_SIZE,
-        decision_timeout_s=(
-            DEFAULT_DECISION_TIMEOUT_S if args.decision_timeout is None else args.decision_timeout
-        ),
+        agent_options=options,
         progress=not args.no_progress,
         backend=args.backend,
         address=args.address,

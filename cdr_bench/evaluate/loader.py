@@ -201,14 +201,9 @@ class LoadedAgent:
             self._reset(seed)
 
 
-def load_agent(
-    path: str | os.PathLike[str], observation_space: Any, action_space: Any
-) -> LoadedAgent:
-    """Import the agent file at ``path`` and construct ``Agent(observation_space, action_space)``.
-
-    Raises :class:`AgentError` for a missing file, a syntax or import error, a file without a
-    class ``Agent``, an ``Agent`` without ``act`` and a constructor that raises.
-    """
+def load_module(path: str | os.PathLike[str]) -> ModuleType:
+    """Import the agent file at ``path`` (a ``.py`` file or a folder holding ``agent.py``) and
+    check that it defines a class ``Agent`` with ``act``; :class:`AgentError` otherwise."""
     f = resolve_agent_path(path)
     module = _import_file(f)
     cls = getattr(module, "Agent", None)
@@ -220,11 +215,31 @@ def load_agent(
         raise AgentError(f"agent file {f}: `Agent` is not a class but {type(cls).__name__}")
     if not callable(getattr(cls, "act", None)):
         raise AgentError(f"agent file {f}: `Agent` has no act(observation) method")
+    module.__dict__.setdefault("__cdr_bench_agent_file__", f)
+    return module
+
+
+def construct(module: ModuleType, observation_space: Any, action_space: Any) -> LoadedAgent:
+    """``Agent(observation_space, action_space)`` of a module from :func:`load_module`."""
+    f = Path(module.__dict__["__cdr_bench_agent_file__"])
     try:
-        instance = cls(observation_space, action_space)
+        instance = module.Agent(observation_space, action_space)
     except Exception as e:
         raise AgentError(
             f"agent file {f}: Agent(observation_space, action_space) raised: "
             f"{agent_error_line(e, f)}"
         ) from None
     return LoadedAgent(instance, f)
+
+
+def load_agent(
+    path: str | os.PathLike[str], observation_space: Any, action_space: Any
+) -> LoadedAgent:
+    """Import the agent file at ``path`` and construct ``Agent(observation_space, action_space)``
+    in THIS process (the evaluator never does this: it runs the agent in its own process,
+    :mod:`cdr_bench.evaluate.remote`; this is for the agent process and for tests).
+
+    Raises :class:`AgentError` for a missing file, a syntax or import error, a file without a
+    class ``Agent``, an ``Agent`` without ``act`` and a constructor that raises.
+    """
+    return construct(load_module(path), observation_space, action_space)

@@ -8,37 +8,42 @@ of the batch (``act_batch``). Episode ``i`` starts from
 and the agent's ``reset`` gets a seed derived from the batch, so a batch's results do not depend on
 which process runs it, in which order, or whether the run was resumed.
 
-Every returned action is checked before the step (an integer in 0..26; not a float, NaN or bool);
-a masked action is passed on (the simulator does not execute its level change) and counted. Agent
-exceptions, invalid values and decisions over the time limit raise :class:`AgentError` naming the
-scenario, the episode, its seed, the step and the aircraft.
+The agent runs in its own process (:mod:`.remote`); this module only sends it observations and
+masks and receives actions. Every returned action is checked (an integer in 0..26; not a float,
+NaN or bool); a masked action is passed on (the simulator does not execute its level change) and
+counted. Agent exceptions, invalid values, decisions over the time limit and an agent process that
+dies raise :class:`AgentError` naming the scenario, the episode, its seed, the step and the
+aircraft.
 """
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import math
-import numbers
-import signal
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from cdr_bench.actions import HOLD, N_ACTIONS
-from cdr_bench.evaluate.loader import AgentError, LoadedAgent, agent_error_line, load_agent
+from cdr_bench.evaluate.loader import AgentError
+from cdr_bench.evaluate.remote import (
+    DEFAULT_DECISION_TIMEOUT_S,
+    AgentFault,
+    AgentOptions,
+    AgentProcess,
+    RemoteAgent,
+)
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig
-from cdr_bench.sim import OUTCOME_NAMES
+from cdr_bench.sim import OUTCOME_NAMES, observation_bounds
 from cdr_bench.vector_env import VectorEnv, observation_space
 
+__all__ = ["DEFAULT_DECISION_TIMEOUT_S", "run_batch", "run_batch_task", "load_for"]
+
 DEFAULT_BATCH_SIZE = 200
-DEFAULT_DECISION_TIMEOUT_S = 10.0
 
 
 def spaces_for(config: ScenarioConfig) -> tuple[Any, Any]:
@@ -55,103 +60,16 @@ def batch_seed(base_seed: int, scenario_id: str, config_hash: str, batch_index: 
 
 
 # ----------------------------------------------------------------------------------------------
-# Per-decision time limit
-
-
-class DecisionTimeout(BaseException):
-    """Raised inside the agent when a decision exceeds the limit (a BaseException so that an
-    agent's own ``except Exception`` cannot swallow it)."""
-
-
-@contextmanager
-def deadline(seconds: float) -> Iterator[None]:
-    """Interrupt the block with :class:`DecisionTimeout` after ``seconds`` (SIGALRM on POSIX in
-    the main thread; elsewhere the caller checks the elapsed time afterwards)."""
-    usable = (
-        seconds > 0
-        and math.isfinite(seconds)
-        and hasattr(signal, "setitimer")
-        and threading.current_thread() is threading.main_thread()
-    )
-    if not usable:
-        yield
-        return
-
-    def on_alarm(signum: int, frame: Any) -> None:
-        raise DecisionTimeout()
-
-    previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0.0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-# ----------------------------------------------------------------------------------------------
-# Validation of returned actions
-
-
-def _describe(value: Any) -> str:
-    return f"{value!r} ({type(value).__name__})"
-
-
-def validate_actions(out: Any, n: int) -> tuple[NDArray[np.int64] | None, int, str]:
-    """``(actions, -1, "")`` if ``out`` holds ``n`` integers in 0..26, else
-    ``(None, row, what)`` naming the first bad row (-1: the shape is wrong) and the value."""
-    if isinstance(out, np.ndarray):
-        arr = out
-    else:
-        try:
-            seq = list(out)
-        except TypeError:
-            return None, -1, f"expected {n} action indices, got {_describe(out)}"
-        for i, v in enumerate(seq):
-            if not _is_int(v):
-                return None, i, f"got {_describe(v)}, expected an integer in 0..{N_ACTIONS - 1}"
-        arr = np.asarray(seq, dtype=np.int64) if seq else np.zeros(0, np.int64)
-    if arr.shape != (n,):
-        if arr.size == n and arr.ndim == 2 and arr.shape[1] == 1:
-            arr = arr.reshape(n)
-        else:
-            return None, -1, f"expected {n} action indices, got an array of shape {arr.shape}"
-    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.integer):
-        bad = 0
-        if np.issubdtype(arr.dtype, np.floating):
-            nan = np.flatnonzero(np.isnan(arr))
-            bad = int(nan[0]) if nan.size else 0
-        v = arr[bad].item() if arr.dtype != object else arr[bad]
-        return (
-            None,
-            bad,
-            (f"got {v!r} (dtype {arr.dtype}), expected an integer in 0..{N_ACTIONS - 1}"),
-        )
-    out_of_range = np.flatnonzero((arr < 0) | (arr >= N_ACTIONS))
-    if out_of_range.size:
-        i = int(out_of_range[0])
-        return None, i, f"got {int(arr[i])}, expected an integer in 0..{N_ACTIONS - 1}"
-    return arr.astype(np.int64, copy=False), -1, ""
-
-
-def _is_int(v: Any) -> bool:
-    if isinstance(v, np.ndarray) and v.ndim == 0:
-        v = v[()]
-    return isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_))
-
-
-# ----------------------------------------------------------------------------------------------
 # One batch
 
 
 def run_batch(
-    agent: LoadedAgent,
+    agent: RemoteAgent,
     config: ScenarioConfig,
     base_seed: int,
     batch_index: int,
     batch_size: int,
     n_episodes: int,
-    decision_timeout_s: float = DEFAULT_DECISION_TIMEOUT_S,
 ) -> dict[str, Any]:
     """Run batch ``batch_index`` of a scenario (episodes on the fixed grid, at most
     ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``."""
@@ -162,7 +80,11 @@ def run_batch(
     E = stop - start
     env = VectorEnv(config, num_envs=E)
     obs_all, masks_all = env.reset(seeds=seeds)
-    agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
+    try:
+        agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
+    except AgentFault as f:
+        at = f"reset(seed) before episodes {start}..{stop - 1} of scenario {config.id!r}"
+        raise AgentError(fault_message(f, agent, at)) from None
     ids = env.agent_ids
     M = env.n_agents
 
@@ -194,30 +116,17 @@ def run_batch(
         n = rows_e.size
         t0 = time.perf_counter()
         try:
-            with deadline(decision_timeout_s):
-                out = agent.act_batch(obs, masks)
-        except DecisionTimeout:
-            raise AgentError(
-                f"agent {agent.name}: a decision exceeded the time limit of "
-                f"{decision_timeout_s:g} s ({where(0)}{' and others' if n > 1 else ''}; "
-                "--decision-timeout sets the limit)"
-            ) from None
-        except Exception as exc:
-            row, err = _localise(agent, obs, masks, decision_timeout_s)
-            line = agent_error_line(err or exc, agent.path)
-            at = where(row) if row >= 0 else f"{where(0)} (one of {n} aircraft of the batch)"
-            raise AgentError(f"agent {agent.name} raised in {at}: {line}") from None
-        elapsed = time.perf_counter() - t0
-        if elapsed > decision_timeout_s > 0:  # no SIGALRM available (not the main thread)
-            raise AgentError(
-                f"agent {agent.name}: a decision exceeded the time limit of "
-                f"{decision_timeout_s:g} s ({where(0)}; took {elapsed:.1f} s)"
+            actions = agent.act_batch(obs, masks)
+        except AgentFault as f:
+            if f.kind == "raised" and f.row < 0 and n > 1:
+                f = agent.localise(obs, masks) or f
+            at = (
+                where(f.row)
+                if 0 <= f.row < n
+                else where(0) + (f" (one of {n} aircraft of the batch)" if n > 1 else "")
             )
-        actions, row, what = validate_actions(out, n)
-        if actions is None:
-            at = where(max(row, 0)) if row >= 0 else where(0) + f" (batch of {n} aircraft)"
-            how = "act_batch" if agent.has_act_batch else "act"
-            raise AgentError(f"agent {agent.name}: invalid action from {how} in {at}: {what}")
+            raise AgentError(fault_message(f, agent, at)) from None
+        elapsed = time.perf_counter() - t0
         per_call_ms.append(elapsed * 1e3)
         per_decision_ms.append(elapsed * 1e3 / n)
 
@@ -274,40 +183,55 @@ def run_batch(
     }
 
 
-def _localise(
-    agent: LoadedAgent,
-    obs: NDArray[np.float32],
-    masks: NDArray[np.int8],
-    timeout_s: float,
-) -> tuple[int, BaseException | None]:
-    """After ``act_batch`` raised on a batch: the first row that raises on its own and its error
-    (``(-1, None)`` if none does)."""
-    if obs.shape[0] <= 1:
-        return (0 if obs.shape[0] == 1 else -1), None
-    for i in range(obs.shape[0]):
-        try:
-            with deadline(timeout_s):
-                agent.act_batch(obs[i : i + 1], masks[i : i + 1])
-        except DecisionTimeout:
-            return -1, None
-        except Exception as e:  # noqa: BLE001 - the agent's own error, reported verbatim
-            return i, e
-    return -1, None
+def fault_message(f: AgentFault, agent: RemoteAgent, at: str) -> str:
+    """One line (plus the confined agent's last output) for a fault of ``agent`` at ``at``."""
+    name = agent.name
+    if f.kind == "raised":
+        return f"agent {name} raised in {at}: {f.message}"
+    if f.kind == "invalid":
+        head, _, what = f.message.partition(": ")
+        return f"agent {name}: {head} in {at}: {what}"
+    if f.kind == "timeout":
+        limit = agent.process.options.decision_timeout_s
+        return (
+            f"agent {name}: a decision exceeded the time limit of {limit:g} s ({at}; killed; "
+            "--decision-timeout sets the limit)"
+        )
+    return (
+        f"agent {name}: {f.message.rstrip()} ({at})"
+        if "\n" not in f.message
+        else (f"agent {name}: in {at}: {f.message}")
+    )
 
 
 # ----------------------------------------------------------------------------------------------
-# Worker processes (spawn-safe: everything is passed by value, the agent is loaded by path)
+# The agent process of this process (spawn-safe: everything is passed by value)
 
-_WORKER_AGENTS: dict[tuple[str, str], LoadedAgent] = {}
+_PROCESSES: dict[tuple[str, AgentOptions], AgentProcess] = {}
 
 
-def load_for(agent_path: str | Path, config: ScenarioConfig) -> LoadedAgent:
-    """The agent constructed with the spaces of ``config`` (cached per process)."""
-    key = (str(agent_path), config.config_hash())
-    if key not in _WORKER_AGENTS:
-        obs_space, act_space = spaces_for(config)
-        _WORKER_AGENTS[key] = load_agent(agent_path, obs_space, act_space)
-    return _WORKER_AGENTS[key]
+def load_for(
+    agent_path: str | Path, config: ScenarioConfig, options: AgentOptions | None = None
+) -> RemoteAgent:
+    """The agent, constructed with the spaces of ``config``, in this process's agent process
+    (started on first use, one per agent and options; closed at exit or by :func:`close_all`)."""
+    options = options or AgentOptions()
+    key = (str(agent_path), options)
+    proc = _PROCESSES.get(key)
+    if proc is None or proc.proc.poll() is not None:
+        proc = _PROCESSES[key] = AgentProcess(agent_path, options)
+    low, high = observation_bounds(config)
+    return proc.instance(low, high)
+
+
+def close_all() -> None:
+    """Stop every agent process this process started."""
+    while _PROCESSES:
+        _, proc = _PROCESSES.popitem()
+        proc.close()
+
+
+atexit.register(close_all)
 
 
 def run_batch_task(
@@ -317,10 +241,8 @@ def run_batch_task(
     batch_index: int,
     batch_size: int,
     n_episodes: int,
-    decision_timeout_s: float,
+    options: AgentOptions,
 ) -> dict[str, Any]:
-    """:func:`run_batch` with the agent loaded in this process (the worker entry point)."""
-    agent = load_for(agent_path, config)
-    return run_batch(
-        agent, config, base_seed, batch_index, batch_size, n_episodes, decision_timeout_s
-    )
+    """:func:`run_batch` with the agent of this process (the worker entry point)."""
+    agent = load_for(agent_path, config, options)
+    return run_batch(agent, config, base_seed, batch_index, batch_size, n_episodes)

@@ -2,9 +2,12 @@
 
 * ``build``: render ``README.md``, ``index.html``, ``leaderboard.json`` and ``plots/*.png`` from
   the submissions and the result files in ``results/`` (nothing is evaluated).
-* ``build --evaluate``: first run ``cdr-bench evaluate`` (and ``cdr-bench multimodal`` where a
-  submission asks) for every submission (or the named ones), each in its own sandboxed process
-  (:mod:`.sandbox`), then render.
+* ``build --evaluate``: first evaluate (and map the first-action distribution where a
+  submission asks) every submission (or the named ones), then render. Each submission is scored
+  by a trusted child process (:mod:`.entry`: simulator, runner, result files) while its agent
+  runs in another process confined by bubblewrap (:mod:`cdr_bench.evaluate.sandbox`: read-only
+  view of the repository with this folder hidden, private scratch, no network, own PID
+  namespace, CPU and memory limits); the two exchange only observations and actions.
 * ``build --check``: re-evaluate every submission into a scratch folder and compare with the
   committed result files, then re-render from the committed results and compare with the
   committed pages; exit code 1 and a readable diff if anything differs. Writes nothing.
@@ -12,9 +15,11 @@
   compared, so they may share the cores). CI checks a fixed sample, the first batch of every
   scenario (``--check --episodes 200``); plain ``--check`` re-runs every committed episode.
 
-All-or-nothing: everything is produced in a scratch folder inside the leaderboard folder; only
-when every submission succeeded and every page rendered are the files moved into place (renames
-only). A failing submission leaves the leaderboard untouched.
+All-or-nothing: everything is produced in a staging folder inside the leaderboard folder (hidden
+from every agent); only when every submission succeeded and every page rendered are the files
+moved into place: the results folder in one rename, then the plots folder and each page (renames
+only). A failing or hostile submission leaves every committed file byte-identical: its agent
+could not write anywhere but its own scratch folder.
 
 What ``--check`` compares: result files byte for byte (the per-episode JSONL) and field for
 field (the JSON), except ``timing`` (wall time, latency: machine-dependent), ``versions`` and
@@ -46,6 +51,16 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate.loader import agent_files
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
+from cdr_bench.evaluate.sandbox import (
+    Confinement,
+    Limits,
+    SandboxError,
+    clean,
+    confined_argv,
+    isolation,
+    set_limits,
+    tail,
+)
 from cdr_bench.leaderboard.data import (
     DEFAULT_REFERENCE,
     build_data,
@@ -56,13 +71,6 @@ from cdr_bench.leaderboard.data import (
     result_path,
 )
 from cdr_bench.leaderboard.published import load_published
-from cdr_bench.leaderboard.sandbox import (
-    Limits,
-    SandboxError,
-    network_isolation,
-    run_sandboxed,
-    scan_agent_code,
-)
 from cdr_bench.leaderboard.submission import Submission, load_submissions
 
 PAPER_EPISODES = 1000
@@ -116,6 +124,73 @@ def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, byt
 # Evaluation of one submission (sandboxed)
 
 
+def run_child(
+    argv: list[str],
+    *,
+    what: str,
+    cwd: Path,
+    log_dir: Path,
+    wall_s: float,
+    env: dict[str, str] | None = None,
+    limits: Limits | None = None,
+) -> float:
+    """Run ``argv`` in its own session with a wall-clock limit (then its whole process group is
+    killed); returns the wall time. :class:`SandboxError` naming ``what`` when it fails, with
+    its last output (control characters removed)."""
+    import signal
+    import subprocess
+
+    log_dir.mkdir(parents=True, exist_ok=True)
+    out_log, err_log = log_dir / "stdout.log", log_dir / "stderr.log"
+    t0 = time.perf_counter()
+    with open(out_log, "wb") as out, open(err_log, "wb") as err:
+        proc = subprocess.Popen(
+            argv,
+            cwd=cwd,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=err,
+            start_new_session=True,
+            preexec_fn=(lambda: set_limits(limits)) if limits is not None else None,
+        )
+        try:
+            code = proc.wait(timeout=wall_s)
+        except subprocess.TimeoutExpired:
+            code = None
+        finally:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)  # whatever it left behind
+            except (ProcessLookupError, PermissionError):
+                pass
+            proc.wait()
+    wall = time.perf_counter() - t0
+    text = clean(tail(err_log)) or clean(tail(out_log))
+    last = "\n  last output:\n    " + text.replace("\n", "\n    ") if text else ""
+    if code is None:
+        raise SandboxError(
+            f"{what}: did not finish within the wall-clock limit of {wall_s:g} s (killed){last}"
+        )
+    if code == 0:
+        return wall
+    errors = [r for r in clean(tail(err_log), 400, 2000).splitlines() if r.startswith(_ERROR)]
+    if code == 2 and errors:  # the scorer's own one-line error (e.g. what the agent did)
+        raise SandboxError(f"{what}: {errors[-1].removeprefix(_ERROR)}")
+    why = f"exit code {code}" if code > 0 else f"killed by {signal.Signals(-code).name}"
+    raise SandboxError(f"{what}: failed ({why}){last}")
+
+
+_ERROR = "cdr-bench: error: "
+
+
+def _inside(root: Path, rel: str, what: str, field_name: str) -> Path:
+    """``root/rel`` with symlinks resolved, refused unless it stays inside ``root``."""
+    full = (root / rel).resolve()
+    if not full.is_relative_to(root.resolve()):
+        raise SandboxError(f"{what}: {field_name} {rel} resolves to {full}, outside {root}")
+    return full
+
+
 def evaluate_submission(
     sub: Submission,
     root: Path,
@@ -128,47 +203,67 @@ def evaluate_submission(
     """Write ``out_dir/<name>.json|.jsonl`` (and multimodality files) for one submission;
     returns the wall time. :class:`SandboxError` / :class:`UserError` name the submission."""
     what = f"submission {sub.name} ({sub.source})"
-    files = agent_files(root / sub.agent)
-    problems = scan_agent_code(files)
-    if problems:
-        raise SandboxError(
-            f"{what}: refused: the agent code loads pickle-family data, which can run arbitrary "
-            "code (use torch.load(weights_only=True), safetensors or numpy without pickle):\n  "
-            + "\n  ".join(problems)
-        )
-    env = {"CDR_BENCH_CHECKPOINT": sub.checkpoint} if sub.checkpoint else {}
+    lb_dir = sub.source.resolve().parent.parent
+    agent = _inside(root, sub.agent, what, "agent")
+    if agent.is_relative_to(lb_dir):
+        raise SandboxError(f"{what}: agent {sub.agent} lies inside the leaderboard folder")
+    for f in agent_files(agent):
+        _inside(root, str(f), what, "agent file")
+    env = dict(os.environ)
+    env.pop("CDR_BENCH_CHECKPOINT", None)
     py = sys.executable
     wall = 0.0
     if sub.checkpoint:
-        wall += run_sandboxed(
-            [py, "-m", "cdr_bench.leaderboard.safeload", sub.checkpoint],
+        _inside(root, sub.checkpoint, what, "checkpoint")
+        env["CDR_BENCH_CHECKPOINT"] = sub.checkpoint
+        conf = Confinement(view=str(root), hidden=(str(lb_dir),), limits=limits)
+        box = scratch / "safeload"
+        box.mkdir(parents=True, exist_ok=True)
+        argv, box_env = confined_argv(
+            [py, "-m", "cdr_bench.leaderboard.safeload", sub.checkpoint], conf, box
+        )
+        wall += run_child(
+            argv,
             what=f"{what}: checkpoint {sub.checkpoint}",
             cwd=root,
-            scratch=scratch / "safeload",
+            log_dir=scratch / "safeload-log",
+            wall_s=limits.wall_s,
+            env=box_env,
             limits=limits,
         )
     out = result_path(out_dir, sub.name)
-    argv = [py, "-m", "cdr_bench", "evaluate", sub.agent]
-    if sub.suite:
-        argv += ["--suite", sub.suite]
-    else:
-        for s in sub.scenarios:
-            argv += ["--scenario", s]
-    argv += [
-        "--episodes",
-        str(episodes),
-        "--seed",
-        str(BASE_SEED),
-        "--batch-size",
-        str(DEFAULT_BATCH_SIZE),
-        "--workers",
-        str(workers),
-        "--out",
-        str(out.resolve()),
-        "--no-progress",
+    mm = [
+        {
+            "scenario": sc,
+            "out": str((scratch / f"multimodal-{sc.replace('/', '_')}.json").resolve()),
+        }
+        for sc in sub.multimodality
     ]
-    wall += run_sandboxed(
-        argv, what=what, cwd=root, scratch=scratch / "evaluate", limits=limits, env_extra=env
+    spec = {
+        "agent": sub.agent,
+        "scenarios": [] if sub.suite else list(sub.scenarios),
+        "suite": sub.suite,
+        "episodes": episodes,
+        "seed": BASE_SEED,
+        "batch_size": DEFAULT_BATCH_SIZE,
+        "workers": workers,
+        "out": str(out.resolve()),
+        "root": str(root.resolve()),
+        "hidden": [str(lb_dir)],
+        "limits": {"cpu_s": limits.cpu_s, "memory_mb": limits.memory_mb, "wall_s": limits.wall_s},
+        "multimodality": mm,
+        "samples": MULTIMODAL_SAMPLES,
+    }
+    spec_file = scratch / "spec.json"
+    spec_file.parent.mkdir(parents=True, exist_ok=True)
+    spec_file.write_text(json.dumps(spec, indent=1), encoding="utf-8")
+    wall += run_child(
+        [py, "-m", "cdr_bench.leaderboard.entry", str(spec_file.resolve())],
+        what=what,
+        cwd=root,
+        log_dir=scratch / "entry-log",
+        wall_s=limits.wall_s,
+        env=env,
     )
     try:
         result = read_result(out)
@@ -180,33 +275,9 @@ def evaluate_submission(
             f"{what}: the result names agent {result['agent']['sha256'][:12]}, the submission's "
             f"files hash to {expected[:12]} (files changed during the run?)"
         )
-    for sc in sub.multimodality:
-        mm_scratch = scratch / f"multimodal-{sc.replace('/', '_')}"
-        mm_out = mm_scratch / "out.json"
-        wall += run_sandboxed(
-            [
-                py,
-                "-m",
-                "cdr_bench",
-                "multimodal",
-                sub.agent,
-                "--scenario",
-                sc,
-                "--samples",
-                str(MULTIMODAL_SAMPLES),
-                "--seed",
-                str(BASE_SEED),
-                "--out",
-                str(mm_out.resolve()),
-            ],
-            what=f"{what}: multimodality on {sc}",
-            cwd=root,
-            scratch=mm_scratch,
-            limits=limits,
-            env_extra=env,
-        )
-        load_multimodal(mm_out)  # refuses garbage
-        shutil.copyfile(mm_out, multimodal_path(out_dir, sub.name, sc))
+    for m in mm:
+        load_multimodal(Path(m["out"]))  # refuses garbage
+        shutil.copyfile(m["out"], multimodal_path(out_dir, sub.name, m["scenario"]))
     return wall
 
 
@@ -271,7 +342,7 @@ def _evaluate_all(
                 f"warning: {sub.name}: files not tracked by git are part of the agent's identity "
                 f"({', '.join(loose)}); commit them, or `--check` on a clean clone will fail"
             )
-    _, iso = network_isolation()
+    _, iso = isolation()
     parallel = max(1, opts.workers) if side_by_side else 1
     per_sub = 1 if side_by_side else opts.workers
     how = (
@@ -281,8 +352,8 @@ def _evaluate_all(
     )
     log(
         f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {how}; limits: "
-        f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per process, "
-        f"{opts.limits.wall_s:g} s wall; {iso}"
+        f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per agent process, "
+        f"{opts.limits.wall_s:g} s wall per submission; agents {iso}"
     )
     t0 = time.perf_counter()
 

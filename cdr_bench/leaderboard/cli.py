@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.leaderboard.sandbox import Limits
+from cdr_bench.evaluate.sandbox import Limits
 
 
 def register(sub: Any) -> None:

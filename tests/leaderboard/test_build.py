@@ -132,7 +132,7 @@ BAD_AGENTS = {
     "spin": (
         "while True:\n    pass\n",
         ["--cpu-limit", "2"],
-        "CPU time limit is 2 s",
+        "the CPU time limit",
     ),
     "hog": (
         "blob = bytearray(8 * 1024 ** 3)\nclass Agent:\n    pass\n",
@@ -140,12 +140,12 @@ BAD_AGENTS = {
         "MemoryError",
     ),
     "pickle": (
-        "import pickle\n"
+        "import pickle, os\n"
         "class Agent:\n"
-        "    def __init__(self, o, a): self.p = pickle.loads(b'')\n"
+        "    def __init__(self, o, a): self.p = pickle.loads(pickle.dumps(os.getcwd))\n"
         "    def act(self, obs): return 13\n",
         [],
-        "pickle-family",
+        "refused: unpickling posix.getcwd",
     ),
 }
 
