@@ -107,6 +107,11 @@ def _repo_path(src: Path, field: str, value: str, root: Path) -> Path:
     full = root / p
     if not full.exists():
         raise SubmissionError(src, field, f"{value} does not exist (relative to {root})")
+    real = full.resolve()
+    if not real.is_relative_to(root.resolve()):
+        raise SubmissionError(
+            src, field, f"{value} resolves to {real} (a symbolic link?), outside the repository"
+        )
     return full
 
 
