@@ -170,7 +170,7 @@ def evaluate(
     done: dict[tuple[str, int], dict[str, Any]] = {}
     if resume:
         try:
-            done = log.load()
+            done = log.load(_batch_check(jobs, base_seed, batch_size))
         except ValueError as e:
             raise UserError(str(e)) from None
         if not log.path.exists():
@@ -268,6 +268,35 @@ def evaluate(
     rf.write_results(out, result, all_episodes)
     log.remove()
     return result
+
+
+def _batch_check(
+    jobs: list[Job], base_seed: int, batch_size: int
+) -> Callable[[dict[str, Any]], str | None]:
+    """A validator of checkpoint lines: the batch belongs to this run, holds the episodes of
+    its place on the grid, with their derived seeds."""
+    configs = {j.config.id: j for j in jobs}
+
+    def check(row: dict[str, Any]) -> str | None:
+        job = configs.get(row.get("scenario"))  # type: ignore[arg-type]
+        k = row.get("batch")
+        if job is None or not isinstance(k, int) or not 0 <= k * batch_size < job.episodes:
+            return "a batch that is not part of this run"
+        start, stop = k * batch_size, min((k + 1) * batch_size, job.episodes)
+        seeds = episode_seeds(base_seed, job.config.id, job.config.config_hash(), start, stop)
+        eps = row.get("episodes")
+        if not isinstance(eps, list) or [
+            (e.get("episode"), e.get("seed")) if isinstance(e, dict) else None for e in eps
+        ] != [(start + i, s) for i, s in enumerate(seeds)]:
+            return f"batch {k} of {job.config.id} does not hold episodes {start}..{stop - 1}"
+        timing = row.get("timing")
+        if not isinstance(timing, dict) or not all(
+            isinstance(timing.get(t), list) for t in ("per_decision_ms", "per_call_ms")
+        ):
+            return f"batch {k} of {job.config.id} has no timing"
+        return None
+
+    return check
 
 
 def _run_tasks(

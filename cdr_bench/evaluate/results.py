@@ -1,12 +1,12 @@
 """Result files: a JSON summary per run and a per-episode JSONL beside it, both written
 atomically (temporary file + ``os.replace``), and the partial checkpoint used by ``--resume``.
 
-Layout of ``<out>.json`` (``schema_version`` 1)::
+Layout of ``<out>.json`` (``schema_version`` 2)::
 
     schema_version, kind, agent {name, path, entry, files {name: sha256}, sha256},
     suite, base_seed, batch_size, seed_derivation, versions {cdr_bench, python, numpy, ...},
     scenarios [{id, config_hash, config, episodes, seeds_sha256, metrics {ownship, intruders}}],
-    episodes_file, run_key,
+    episodes_file, episodes_sha256, run_key,
     timing {wall_s, episodes_per_s, workers, resumed, decision_latency {per scenario}}
 
 Everything outside ``timing`` is a function of the agent's files, the scenarios, the base seed,
@@ -16,8 +16,16 @@ with any ``--workers``) gives a byte-identical JSONL and a JSON identical outsid
 ``<out>.jsonl``: one line per episode and scenario, sorted by scenario (in run order) then
 episode: ``{"scenario", "episode", "seed", "steps", "aircraft": [per-aircraft record]}``.
 
+The two are one result: the JSON carries the SHA-256 of the JSONL (``episodes_sha256``) and
+every reader (:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a
+pair that does not match, e.g. a new JSONL beside an old JSON after a disk filled up between the
+two renames.
+
 ``<out>.partial.jsonl`` (only while a run is unfinished): a header line with the ``run_key``,
-then one line per finished batch (appended and fsync'ed); a torn last line is ignored.
+then one line per finished batch (appended and fsync'ed); a torn last line is ignored. Every
+batch line carries a digest of its content and the run key, and ``--resume`` validates each line
+(digest, scenario, batch index, episode numbers and seeds): an edited or foreign line is an
+error, never merged.
 """
 
 from __future__ import annotations
@@ -27,12 +35,12 @@ import json
 import os
 import platform
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 RESULT_KIND = "cdr-bench evaluation"
 
 
@@ -85,6 +93,12 @@ def jsonl_text(rows: Iterable[dict[str, Any]]) -> str:
     return "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
 
 
+def batch_digest(run_key: str, batch: dict[str, Any]) -> str:
+    """The digest a partial-log line carries: SHA-256 of the run key and the batch's content."""
+    body = {k: v for k, v in batch.items() if k not in ("kind", "digest")}
+    return sha256_text(run_key + "\n" + canonical(body))
+
+
 class PartialLog:
     """The append-only checkpoint of an unfinished run."""
 
@@ -92,29 +106,56 @@ class PartialLog:
         self.path = path
         self.run_key = run_key
 
-    def load(self) -> dict[tuple[str, int], dict[str, Any]]:
+    def load(
+        self, check: Callable[[dict[str, Any]], str | None] | None = None
+    ) -> dict[tuple[str, int], dict[str, Any]]:
         """Finished batches keyed by (scenario id, batch index). Raises ``ValueError`` if the
-        file belongs to another run."""
+        file belongs to another run, is not a partial log, or holds a line that is not a batch
+        this run wrote (bad digest, or ``check(batch)`` returns a reason)."""
         done: dict[tuple[str, int], dict[str, Any]] = {}
         if not self.path.exists():
             return done
-        with open(self.path, encoding="utf-8") as f:
-            lines = f.read().split("\n")
+        if not self.path.is_file():
+            raise ValueError(
+                f"{self.path}: the checkpoint is not a file; delete it or run without --resume"
+            )
+        try:
+            with open(self.path, "rb") as f:
+                lines = f.read().decode("utf-8").split("\n")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ValueError(f"{self.path}: unreadable checkpoint ({e}); delete it") from None
         good_bytes = 0
         for i, line in enumerate(lines):
             if not line:
                 continue
             try:
                 row = json.loads(line)
-            except json.JSONDecodeError:
-                break  # torn last line of a killed run
+            except (json.JSONDecodeError, RecursionError):
+                if i == len(lines) - 1 or all(not x for x in lines[i + 1 :]):
+                    break  # torn last line of a killed run
+                raise ValueError(f"{self.path}:{i + 1}: not a JSON line; delete the file") from None
             if i == 0:
-                if row.get("kind") != "header" or row.get("run_key") != self.run_key:
+                if (
+                    not isinstance(row, dict)
+                    or row.get("kind") != "header"
+                    or row.get("run_key") != self.run_key
+                ):
                     raise ValueError(
                         f"{self.path} belongs to a different run (other agent files, scenarios, "
                         "seed, episodes or batch size); delete it or run without --resume"
                     )
-            elif row.get("kind") == "batch":
+            else:
+                where = f"{self.path}:{i + 1}"
+                if not isinstance(row, dict) or row.get("kind") != "batch":
+                    raise ValueError(f"{where}: not a batch line of this run; delete the file")
+                if row.get("digest") != batch_digest(self.run_key, row):
+                    raise ValueError(
+                        f"{where}: the batch line was changed after it was written (its digest "
+                        "does not match); delete the file and run again"
+                    )
+                why = check(row) if check is not None else None
+                if why:
+                    raise ValueError(f"{where}: {why}; delete the file and run again")
                 done[(row["scenario"], int(row["batch"]))] = row
             good_bytes += len(line.encode()) + 1
         with open(self.path, "r+b") as f:  # drop a torn tail so appends start on a new line
@@ -125,7 +166,8 @@ class PartialLog:
         atomic_write_text(self.path, json.dumps({"kind": "header", **header}) + "\n")
 
     def append(self, batch: dict[str, Any]) -> None:
-        line = json.dumps({"kind": "batch", **batch}, separators=(",", ":")) + "\n"
+        row = {"kind": "batch", **batch, "digest": batch_digest(self.run_key, batch)}
+        line = json.dumps(row, separators=(",", ":")) + "\n"
         with open(self.path, "a", encoding="utf-8") as f:
             f.write(line)
             f.flush()
@@ -136,32 +178,59 @@ class PartialLog:
 
 
 def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, Any]]) -> None:
-    """The per-episode JSONL first, then the JSON that refers to it (both atomic)."""
-    atomic_write_text(episodes_path(out), jsonl_text(episodes))
+    """The per-episode JSONL first, then the JSON that names it and carries its SHA-256 (both
+    atomic); readers refuse a pair whose hashes differ."""
+    text = jsonl_text(episodes)
+    result = {**result, "episodes_sha256": sha256_text(text)}
+    atomic_write_text(episodes_path(out), text)
     atomic_write_text(out, json.dumps(result, indent=1) + "\n")
 
 
+def _file_sha256(p: Path) -> str:
+    h = hashlib.sha256()
+    with open(p, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
 def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """A result JSON, checked for kind and schema version (``ValueError`` otherwise)."""
+    """A result JSON, checked for kind and schema version, and against its per-episode JSONL
+    (present, same SHA-256); ``ValueError`` naming the file otherwise."""
     p = Path(path)
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ValueError(f"{p}: no such result file") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{p}: not a JSON result file ({e})") from None
+    except IsADirectoryError:
+        raise ValueError(f"{p}: is a folder, not a result file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"{p}: unreadable ({e})") from None
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise ValueError(f"{p}: not a JSON result file ({str(e)[:80]})") from None
     if not isinstance(data, dict) or data.get("kind") != RESULT_KIND:
         raise ValueError(f"{p}: not a cdr-bench evaluation result")
     if data.get("schema_version") != SCHEMA_VERSION:
         raise ValueError(
-            f"{p}: schema_version {data.get('schema_version')!r}, this cdr-bench reads "
-            f"{SCHEMA_VERSION}"
+            f"{p}: schema_version {str(data.get('schema_version'))[:20]!r}, this cdr-bench reads "
+            f"{SCHEMA_VERSION} (re-run the evaluation)"
+        )
+    name = data.get("episodes_file")
+    if not isinstance(name, str) or "/" in name or "\\" in name or not name.endswith(".jsonl"):
+        raise ValueError(f"{p}: episodes_file: expected a .jsonl file name beside the result")
+    ep = p.parent / name
+    if not ep.is_file():
+        raise ValueError(f"{p}: its per-episode file {ep} is missing")
+    if _file_sha256(ep) != data.get("episodes_sha256"):
+        raise ValueError(
+            f"{p}: its per-episode file {ep.name} does not match it (episodes_sha256 differs: "
+            "an interrupted write or an edit); re-run the evaluation"
         )
     return data
 
 
 def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:
-    """The per-episode records beside a result JSON."""
+    """The per-episode records beside a result JSON (checked by :func:`read_result`)."""
     p = Path(result_path).parent / result["episodes_file"]
     if not p.exists():
         raise ValueError(f"{p}: per-episode file of {result_path} is missing")

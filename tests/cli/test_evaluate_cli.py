@@ -78,7 +78,7 @@ def test_evaluate_writes_summary_and_result_files(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "ownship" in r.stdout and "intruders" in r.stdout and "success" in r.stdout
     res = json.loads(out.read_text())
-    assert res["schema_version"] == 1 and res["agent"]["name"] == "direct"
+    assert res["schema_version"] == 2 and res["agent"]["name"] == "direct"
     assert "agent.py" in res["agent"]["files"]
     sc = res["scenarios"][0]
     assert sc["id"] == "marl/low-2" and sc["config"]["id"] == "marl/low-2"
@@ -221,11 +221,72 @@ CASES = {
 }
 
 
+ACT13 = "    def act(self, o):\n        return 13\n"
+CASES.update(
+    {
+        # the limit is enforced from outside the agent's process: nothing inside can stop it
+        "swallows_timeout": (
+            "import signal\n"
+            + BASE
+            + """
+    def act_batch(self, o, m):
+        signal.signal(signal.SIGALRM, signal.SIG_IGN)
+        while True:
+            try:
+                while True:
+                    pass
+            except BaseException:
+                continue
+"""
+            + ACT13,
+            "exceeded the time limit of 0.5 s",
+        ),
+        "import_hang": ("while True:\n    pass\n" + BASE + ACT13, "loading did not finish"),
+        "ctor_hang": (BASE.replace("pass", "while True: pass") + ACT13, "loading did not finish"),
+        "endless_iterator": (
+            "import itertools\n"
+            + BASE
+            + "    def act_batch(self, o, m):\n        return itertools.count(13, 0)\n"
+            + ACT13,
+            "expected 4 action indices, got more",
+        ),
+        "reset_raises": (
+            BASE
+            + "    def reset(self, seed):\n        raise ValueError('no seed for you')\n"
+            + ACT13,
+            "reset(seed) before episodes 0..3",
+        ),
+        "os_exit": (
+            "import os\n" + BASE + "    def act(self, o):\n        os._exit(0)\n",
+            "exited (exit code 0",
+        ),
+        "sys_exit": (
+            "import sys\n" + BASE + "    def act(self, o):\n        sys.exit(3)\n",
+            "exited with code 3",
+        ),
+        "kills_itself": (
+            "import os, signal\n"
+            + BASE
+            + "    def act(self, o):\n        os.kill(os.getpid(), signal.SIGKILL)\n",
+            "was killed (SIGKILL",
+        ),
+    }
+)
+
+
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_misbehaving_agent_is_reported(tmp_path, case):
     body, expected = CASES[case]
     path = tmp_path / "missing.py" if body is None else write_agent(tmp_path, body)
-    r = evaluate(path, tmp_path / "out" / "r.json", "--decision-timeout", 0.5, cwd=tmp_path)
+    r = evaluate(
+        path,
+        tmp_path / "out" / "r.json",
+        "--decision-timeout",
+        0.5,
+        "--load-timeout",
+        3,
+        cwd=tmp_path,
+    )
     assert r.returncode == 2, (r.stdout, r.stderr)
     assert expected in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
@@ -234,8 +295,94 @@ def test_misbehaving_agent_is_reported(tmp_path, case):
     if case == "act_raises":  # the episode, the step and the agent's own line
         assert "episode 0" in r.stderr and "step 5," in r.stderr  # time 5/1000 > 0.004
         assert 'agent_x.py:11: `x = {}["boom"]`' in r.stderr
-    if case in ("out_of_range", "float_action", "nan_action"):
+    if case in ("out_of_range", "float_action", "nan_action", "os_exit", "swallows_timeout"):
         assert "episode 0" in r.stderr and "step 0" in r.stderr and "ownship_0" in r.stderr
+    if case == "reset_raises":
+        assert "agent_x.py:" in r.stderr and "no seed for you" in r.stderr
+
+
+def test_agent_that_exits_in_a_worker_is_reported(tmp_path):
+    path = write_agent(
+        tmp_path, "import os\n" + BASE + "    def act(self, o):\n        os._exit(0)\n"
+    )
+    r = evaluate(path, tmp_path / "r.json", "--workers", 2, episodes=8)
+    assert r.returncode == 2 and "exited (exit code 0" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and "BrokenProcessPool" not in r.stderr
+    assert no_results_left(tmp_path)
+
+
+@pytest.mark.parametrize("flag", ["--decision-timeout", "--load-timeout"])
+@pytest.mark.parametrize("value", ["0", "nan", "-1", "inf", "1e9"])
+def test_a_time_limit_cannot_be_disabled(tmp_path, flag, value):
+    r = evaluate(AGENTS / "direct", tmp_path / "r.json", flag, value, episodes=4)
+    assert r.returncode == 2, r.stderr
+    assert flag in r.stderr and "Traceback" not in r.stderr
+    assert "expected a number of seconds > 0" in r.stderr or "at most" in r.stderr
+
+
+
+
+@pytest.mark.parametrize("kind", ["directory", "bare_batch", "edited", "binary"])
+def test_resume_refuses_a_bad_checkpoint(tmp_path, kind):
+    out = tmp_path / "r.json"
+    partial = out.with_suffix(".partial.jsonl")
+    slow = write_agent(
+        tmp_path,
+        BASE + "    def act_batch(self, o, m):\n        time.sleep(0.01)\n"
+        "        return np.full(len(o), 13)\n" + ACT13,
+    )
+    cmd = [sys.executable, "-m", "cdr_bench", "evaluate", str(slow), "--scenario", "low"]
+    cmd += ["--episodes", "16", "--out", str(out), "--no-progress", "--batch-size", "4"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        if partial.exists() and len(partial.read_text().splitlines()) >= 3:
+            break
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not out.exists(), "killed too late to test resume"
+    lines = partial.read_text().splitlines()[:3]
+    if kind == "directory":
+        partial.unlink()
+        partial.mkdir()
+        expected = "not a file"
+    elif kind == "bare_batch":
+        lines.append('{"kind":"batch"}')
+        expected = "changed after it was written"
+    elif kind == "edited":
+        lines[1] = (
+            lines[1]
+            .replace('"outcome":"los"', '"outcome":"success"')
+            .replace('"los":true', '"los":false')
+        )
+        lines[1] = lines[1].replace('"steps":', '"steps":1', 1)  # an edit in any case
+        expected = "changed after it was written"
+    else:
+        partial.write_bytes(b"\xff\xfe\x00garbage\n")
+        expected = "unreadable checkpoint"
+    if kind not in ("directory", "binary"):
+        partial.write_text("\n".join(lines) + "\n")
+    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert expected in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists()
+
+
+def test_report_refuses_a_result_whose_episode_log_differs(tmp_path):
+    out = tmp_path / "r.json"
+    assert evaluate(AGENTS / "direct", out, episodes=4).returncode == 0
+    assert cli("report", out).returncode == 0
+    # a disk that filled up between the two renames: a new JSONL beside the old JSON
+    ep = out.with_suffix(".jsonl")
+    ep.write_text(ep.read_text().replace('"outcome":"los"', '"outcome":"success"') + "\n")
+    for cmd in (("report", out), ("compare", out, out)):
+        r = cli(*cmd)
+        assert r.returncode == 2, r.stderr
+        assert "does not match it" in r.stderr and "Traceback" not in r.stderr
+    ep.unlink()
+    r = cli("report", out)
+    assert r.returncode == 2 and "is missing" in r.stderr
 
 
 def test_masked_action_is_counted_not_fatal(tmp_path):
