@@ -320,8 +320,6 @@ def test_a_time_limit_cannot_be_disabled(tmp_path, flag, value):
     assert "expected a number of seconds > 0" in r.stderr or "at most" in r.stderr
 
 
-
-
 @pytest.mark.parametrize("kind", ["directory", "bare_batch", "edited", "binary"])
 def test_resume_refuses_a_bad_checkpoint(tmp_path, kind):
     out = tmp_path / "r.json"
