@@ -31,8 +31,14 @@ level change is not executed; a value that is not an integer in 0..26 (a float, 
 out-of-range index), an exception in the agent or a decision that exceeds the per-decision time
 limit stops the run with the episode, the step and what went wrong.
 
-The evaluator imports nothing of torch; an agent that needs it imports it itself and locates
-its checkpoint relative to its own file (``pathlib.Path(__file__).parent``).
+The agent runs in its own process (:mod:`cdr_bench.evaluate.remote`): it is imported and
+constructed there, receives the observation and mask arrays of each step and returns actions;
+it never sees the simulator or the result files, and its ``print`` goes to standard error.
+Loading and construction must finish within ``--load-timeout`` (300 s) and every decision within
+``--decision-timeout`` (10 s), both enforced from outside its process; an agent process that
+exits or dies stops the run with the exit status. The evaluator imports nothing of torch; an
+agent that needs it imports it itself and locates its checkpoint relative to its own file
+(``pathlib.Path(__file__).parent``).
 """
 
 from __future__ import annotations
