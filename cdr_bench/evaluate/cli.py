@@ -44,6 +44,10 @@ def register(sub: Any) -> None:
         help="with --backend ray: the cluster address (default: a local Ray of --workers CPUs)",
     )
     p.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    p.add_argument("--force", action="store_true", help="overwrite an existing result file")
+    p.add_argument(
+        "--wide", action="store_true", help="print every metric (default: a compact summary)"
+    )
     p.add_argument(
         "--batch-size",
         type=int,
@@ -57,6 +61,13 @@ def register(sub: Any) -> None:
     c = sub.add_parser("compare", help="paired comparison of two results on the same episodes")
     c.add_argument("result_a")
     c.add_argument("result_b")
+    c.add_argument(
+        "--scenario",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="compare on these scenarios only (repeatable; default: every scenario both hold)",
+    )
     c.add_argument("--json", default=None, help="also write the comparison as JSON here")
     c.set_defaults(func=_compare)
 
@@ -144,6 +155,10 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"cdr-bench: note: {n}", file=sys.stderr)
     options = agent_options(args, args.agent)
     out = Path(args.out) if args.out else default_out(args.agent, jobs, suite)
+    if out.exists() and not (args.force or args.resume):
+        raise UserError(
+            f"{out} exists (an earlier result); --force overwrites it, --out writes elsewhere"
+        )
     result = evaluate(
         args.agent,
         jobs,
@@ -158,7 +173,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         backend=args.backend,
         address=args.address,
     )
-    print(summary_text(result))
+    print(summary_text(result, wide=args.wide))
     print(f"wrote {out} and {out.with_suffix('.jsonl')}")
     return 0
 
@@ -167,7 +182,9 @@ def _compare(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.compare import compare, comparison_table
     from cdr_bench.evaluate.results import atomic_write_text
 
-    cmp = compare(args.result_a, args.result_b)
+    cmp = compare(args.result_a, args.result_b, scenarios=args.scenario or None)
+    for note in cmp.get("notes", []):
+        print(f"cdr-bench: note: {note}", file=sys.stderr)
     print(comparison_table(cmp))
     if args.json:
         atomic_write_text(Path(args.json), json.dumps(cmp, indent=1) + "\n")

@@ -1,7 +1,8 @@
 """Paired comparison of two results run on the same episodes (``cdr-bench compare A B``).
 
-Both results must hold the same scenarios with the same config hash, episode count and episode
-seeds (common random numbers); anything else is refused. For each scenario, aircraft role and
+The comparison runs on the scenarios both results hold (or those named with ``--scenario``),
+each with the same config hash, episode count and episode seeds in both (common random
+numbers); anything else is refused. For each scenario, aircraft role and
 metric the difference B - A comes with a 95 % paired percentile-bootstrap interval: episodes are
 resampled jointly for both agents (2000 resamples, fixed seed), and a metric is the ratio of
 per-episode sums (so learning intruders are resampled as whole episodes).
@@ -58,18 +59,40 @@ def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any
         return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
 
 
-def compare(path_a: str | os.PathLike[str], path_b: str | os.PathLike[str]) -> dict[str, Any]:
-    """Per-metric paired differences B - A; :class:`UserError` if not on the same episodes."""
+def compare(
+    path_a: str | os.PathLike[str],
+    path_b: str | os.PathLike[str],
+    scenarios: list[str] | None = None,
+) -> dict[str, Any]:
+    """Per-metric paired differences B - A on the scenarios both hold (or ``scenarios``);
+    :class:`UserError` if a compared scenario is not on the same episodes."""
     try:
         a, b = read_result(path_a), read_result(path_b)
     except ValueError as e:
         raise UserError(str(e)) from None
-    sa = {s["id"]: s for s in a["scenarios"]}
-    sb = {s["id"]: s for s in b["scenarios"]}
-    if set(sa) != set(sb):
-        raise UserError(
-            f"not the same episodes: scenarios {sorted(sa)} in {path_a} vs {sorted(sb)} in {path_b}"
-        )
+    all_a = {s["id"]: s for s in a["scenarios"]}
+    all_b = {s["id"]: s for s in b["scenarios"]}
+    notes = []
+    if scenarios:
+        for sid in scenarios:
+            for path, have in ((path_a, all_a), (path_b, all_b)):
+                if sid not in have:
+                    raise UserError(f"--scenario {sid}: not in {path} (it holds {', '.join(have)})")
+        keep = list(dict.fromkeys(scenarios))
+    else:
+        keep = [s for s in all_a if s in all_b]
+        if not keep:
+            raise UserError(
+                f"no scenario in common: {', '.join(all_a)} in {path_a} vs "
+                f"{', '.join(all_b)} in {path_b}"
+            )
+        dropped = sorted((set(all_a) | set(all_b)) - set(keep))
+        if dropped:
+            notes.append(
+                f"compared on {', '.join(keep)} only ({', '.join(dropped)}: in one result)"
+            )
+    sa = {k: all_a[k] for k in keep}
+    sb = {k: all_b[k] for k in keep}
     for sid in sa:
         for key in ("config_hash", "episodes", "seeds_sha256"):
             if sa[sid][key] != sb[sid][key]:
@@ -119,6 +142,8 @@ def compare(path_a: str | os.PathLike[str], path_b: str | os.PathLike[str]) -> d
     return {
         "a": {"path": str(path_a), "agent": a["agent"]["name"]},
         "b": {"path": str(path_b), "agent": b["agent"]["name"]},
+        "scenarios": keep,
+        "notes": notes,
         "rows": rows,
     }
 

@@ -33,18 +33,20 @@ class Column:
     higher: bool
     """Higher is better."""
     detail: bool = False
-    """Only in the full per-result tables (``cdr-bench evaluate`` / ``report``)."""
+    """Only in the full per-result tables (``cdr-bench evaluate --wide`` / ``report``)."""
+    short: str = ""
+    """Header of the compact terminal summary; empty: not in it."""
 
 
 COLUMNS: tuple[Column, ...] = (
-    Column("success", "success_rate", "rate", True),
-    Column("LoS", "los_rate", "rate", False),
-    Column("NMAC", "nmac_rate", "rate", False),
-    Column("timeout", "timeout_rate", "rate", False),
+    Column("success", "success_rate", "rate", True, short="success"),
+    Column("LoS", "los_rate", "rate", False, short="LoS"),
+    Column("NMAC", "nmac_rate", "rate", False, short="NMAC"),
+    Column("timeout", "timeout_rate", "rate", False, short="timeout"),
     Column("ended by LoS", "los_terminated_rate", "rate", False, detail=True),
     Column("boundary", "boundary_rate", "rate", False, detail=True),
-    Column("steps (success)", "avg_steps_success", "mean", False),
-    Column("clean success", "clean_success_rate", "rate", True),
+    Column("steps (success)", "avg_steps_success", "mean", False, short="steps"),
+    Column("clean success", "clean_success_rate", "rate", True, short="clean"),
     Column("R_G", "goal_reward", "mean", True),
     Column("R_S", "safety_reward", "mean", True),
     Column("invalid", "invalid_action_rate", "rate", False),
@@ -283,25 +285,34 @@ def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], Rows
 # One result file: ``cdr-bench evaluate`` (plain text) and ``cdr-bench report`` (Markdown)
 
 
-def _result_rows(result: dict[str, Any], ci: bool, label: str | None = None) -> Rows:
+def _result_rows(
+    result: dict[str, Any], ci: bool, label: str | None = None, compact: bool = False
+) -> Rows:
     rows = []
     latency = result.get("timing", {}).get("decision_latency", {})
+    cols = [c for c in COLUMNS if c.short] if compact else COLUMNS
     for sc in result["scenarios"]:
         lat = fmt_latency(latency.get(sc["id"], {}).get("per_decision_ms"))
         for role, m in sc["metrics"].items():
             row = [Cell(label)] if label is not None else []
             row += [Cell(sc["id"]), Cell(role), Cell(str(m["episodes"]))]
-            row += [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in COLUMNS]
-            rows.append(row + [Cell(lat)])
+            row += [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in cols]
+            rows.append(row if compact else row + [Cell(lat)])
     return rows
 
 
 _RESULT_HEAD = ["scenario", "aircraft", "episodes", *[c.header for c in COLUMNS], LATENCY_HEADER]
+_COMPACT_HEAD = ["scenario", "aircraft", "episodes", *[c.short for c in COLUMNS if c.short]]
 
 
-def summary_text(result: dict[str, Any]) -> str:
-    """Every scenario and role of one result, point values (intervals are in the JSON)."""
-    table = text_table(_RESULT_HEAD, _result_rows(result, ci=False))
+def summary_text(result: dict[str, Any], wide: bool = False) -> str:
+    """Every scenario and role of one result, point values (intervals are in the JSON): the
+    paper's five metrics and clean success in under 100 columns, or every column with
+    ``wide``."""
+    if wide:
+        table = text_table(_RESULT_HEAD, _result_rows(result, ci=False))
+    else:
+        table = text_table(_COMPACT_HEAD, _result_rows(result, ci=False, compact=True))
     return f"agent {result['agent']['name']} ({result['agent']['path']})\n{table}"
 
 

@@ -390,3 +390,45 @@ def test_masked_action_is_counted_not_fatal(tmp_path):
     assert r.returncode == 0, r.stderr
     m = json.loads(out.read_text())["scenarios"][0]["metrics"]["ownship"]
     assert m["invalid_action_rate"]["count"] > 0
+
+
+def test_summary_fits_100_columns_and_existing_results_are_kept(tmp_path):
+    out = tmp_path / "r.json"
+    r = evaluate(AGENTS / "direct", out, scenario="curriculum/stage-12", episodes=4)
+    assert r.returncode == 0, r.stderr
+    table = [line for line in r.stdout.splitlines() if not line.startswith("wrote ")]
+    assert max(len(line) for line in table) <= 100, r.stdout
+    assert "success" in r.stdout and "clean" in r.stdout
+    before = out.read_bytes()
+    r = evaluate(AGENTS / "mvp", out, scenario="curriculum/stage-12", episodes=4)
+    assert r.returncode == 2 and "--force" in r.stderr and "Traceback" not in r.stderr
+    assert out.read_bytes() == before
+    r = evaluate(
+        AGENTS / "mvp", out, "--force", "--wide", scenario="curriculum/stage-12", episodes=4
+    )
+    assert r.returncode == 0, r.stderr
+    assert "R_G" in r.stdout and "latency" in r.stdout and out.read_bytes() != before
+
+
+def test_compare_on_the_scenarios_both_results_hold(tmp_path):
+    one, two = tmp_path / "one.json", tmp_path / "two.json"
+    assert evaluate(AGENTS / "direct", one, scenario="medium", episodes=4).returncode == 0
+    r = cli(
+        "evaluate",
+        AGENTS / "mvp",
+        "--scenario",
+        "low",
+        "--scenario",
+        "medium",
+        "--episodes",
+        4,
+        "--out",
+        two,
+        "--no-progress",
+    )
+    assert r.returncode == 0, r.stderr
+    r = cli("compare", one, two)
+    assert r.returncode == 0, r.stderr
+    assert "compared on medium only" in r.stderr and "medium" in r.stdout and "low" not in r.stdout
+    r = cli("compare", one, two, "--scenario", "low")
+    assert r.returncode == 2 and "--scenario low: not in" in r.stderr
