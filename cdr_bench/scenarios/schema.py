@@ -6,26 +6,67 @@ schema: every field has a type, a unit in its name or doc, and (where it applies
 and out-of-range values with a :class:`ScenarioError` naming the file, the field path and what
 was expected.
 
+Limits (well above every shipped scenario, so that no file can ask for unbounded work):
+:data:`MAX_AIRWAYS` airways, :data:`MAX_AIRCRAFT` explicit aircraft,
+:data:`MAX_LEARNING_INTRUDERS` learning intruders, coordinates within +-:data:`MAX_COORD_KM`,
+ids of at most :data:`MAX_NAME_CHARS` characters (see :func:`name_problem`), a description of
+at most :data:`MAX_TEXT_CHARS` printable characters. The file-level limits (size, nesting,
+YAML features) are the loader's.
+
 This module imports neither PettingZoo, Gymnasium nor torch; the simulator consumes it.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import hashlib
 import json
 import math
+import re
 import types
 import typing
+import unicodedata
 from dataclasses import dataclass, field
 from typing import Any, Union
 
-from cdr_bench.errors import ScenarioError
+from cdr_bench.errors import MAX_QUOTED_CHARS, ScenarioError, short_repr
+
+MAX_AIRWAYS = 64
+"""Most airways a scenario may list (``learning_intruders[].airway`` indexes them)."""
+MAX_AIRCRAFT = 256
+"""Most explicitly placed background aircraft."""
+MAX_LEARNING_INTRUDERS = 16
+"""Most learning intruders."""
+MAX_COORD_KM = 10_000.0
+"""Every coordinate is within [-MAX_COORD_KM, MAX_COORD_KM] km (twice the largest sector)."""
+MAX_NAME_CHARS = 128
+"""Longest scenario id or registry name."""
+MAX_TEXT_CHARS = 500
+"""Longest description."""
+
+_NAME_PART = r"[A-Za-z0-9_][A-Za-z0-9._+-]*"
+_NAME = re.compile(rf"{_NAME_PART}(?:/{_NAME_PART})*")
+# Control, format (bidi overrides), line/paragraph separators and surrogates.
+_CONTROL_CATEGORIES = frozenset({"Cc", "Cf", "Cs", "Zl", "Zp"})
 
 
-def _spec(doc: str, lo: float | None = None, hi: float | None = None, **kw: Any) -> Any:
-    """A dataclass field with a docstring and an inclusive numeric range."""
-    return field(metadata={"doc": doc, "min": lo, "max": hi}, **kw)
+def _spec(
+    doc: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    max_items: int | None = None,
+    max_chars: int | None = None,
+    name: bool = False,
+    **kw: Any,
+) -> Any:
+    """A dataclass field with a docstring, an inclusive numeric range (of each number of a
+    point), the most items of a list, the most characters of a text, or a name's rules."""
+    meta = {"doc": doc, "min": lo, "max": hi, "max_items": max_items, "name": name}
+    if max_chars is not None:
+        meta["max_chars"] = max_chars
+    return field(metadata=meta, **kw)
 
 
 Point = tuple[float, float]
@@ -35,15 +76,17 @@ Point = tuple[float, float]
 class Airway:
     """A straight airway from ``start_km`` to ``end_km`` (both on or near the sector edge)."""
 
-    start_km: Point = _spec("entry point [x, y] in km")
-    end_km: Point = _spec("exit point [x, y] in km")
+    start_km: Point = _spec("entry point [x, y] in km", -MAX_COORD_KM, MAX_COORD_KM)
+    end_km: Point = _spec("exit point [x, y] in km", -MAX_COORD_KM, MAX_COORD_KM)
 
 
 @dataclass(frozen=True)
 class Aircraft:
     """An explicitly placed aircraft: flies straight at constant speed and level."""
 
-    position_km: Point = _spec("initial position [x, y] in km")
+    position_km: Point = _spec(
+        "initial position [x, y] in km, inside the sector", -MAX_COORD_KM, MAX_COORD_KM
+    )
     heading_deg: float = _spec("heading in degrees clockwise from north", 0.0, 360.0)
     speed_kt: float = _spec("ground speed in knots", 0.0, 1000.0)
     level: int = _spec("flight level index", 0, 2)
@@ -73,22 +116,41 @@ class SeparationConfig:
 
 @dataclass(frozen=True)
 class OwnshipConfig:
-    speed_kt: float = _spec("initial speed in knots", 100.0, 1000.0, default=430.0)
+    speed_kt: float = _spec(
+        "initial speed in knots, within min/max_speed_kt", 100.0, 1000.0, default=430.0
+    )
     min_speed_kt: float = _spec("lowest commanded speed in knots", 50.0, 1000.0, default=330.0)
     max_speed_kt: float = _spec("highest commanded speed in knots", 50.0, 1000.0, default=530.0)
     heading_step_deg: float = _spec(
         "heading change of one action unit, deg", 0.0, 90.0, default=5.0
     )
     speed_step_kt: float = _spec("speed change of one action unit, kt", 0.0, 200.0, default=50.0)
-    goal_radius_km: float = _spec("goal reached within this distance, km", 0.1, 100.0, default=5.0)
+    goal_radius_km: float = _spec(
+        "goal reached within this distance, km (below half the sector)", 0.1, 100.0, default=5.0
+    )
     goal_margin_km: float = _spec(
-        "random goals keep this distance to every edge, km", 0.0, 1000.0, default=20.0
+        "random goals keep this distance to every edge, km (below half the sector)",
+        0.0,
+        1000.0,
+        default=20.0,
     )
     start_clearance_km: float = _spec(
-        "random starts keep this distance to every intruder, km", 0.0, 200.0, default=20.0
+        "random starts keep this distance to every intruder, km (below half the sector)",
+        0.0,
+        200.0,
+        default=20.0,
     )
-    start: Aircraft | None = _spec("explicit start (random boundary start when null)", default=None)
-    goal_km: Point | None = _spec("explicit goal [x, y] in km (random when null)", default=None)
+    start: Aircraft | None = _spec(
+        "explicit start inside the sector, speed within min/max_speed_kt, no aircraft at its "
+        "level within separation.nmac_km (random boundary start when null)",
+        default=None,
+    )
+    goal_km: Point | None = _spec(
+        "explicit goal [x, y] in km, inside the sector (random when null; needs 'start')",
+        -MAX_COORD_KM,
+        MAX_COORD_KM,
+        default=None,
+    )
 
 
 @dataclass(frozen=True)
@@ -99,7 +161,8 @@ class TrafficConfig:
         "intruder speed in knots (431.965 kt = 800 km/h)", 50.0, 1000.0, default=431.965
     )
     spawn_clearance_km: float = _spec(
-        "a spawn waits while a controlled aircraft at its level is closer than this, km",
+        "a spawn waits while a controlled aircraft at its level is closer than this, km "
+        "(below half the sector)",
         0.0,
         200.0,
         default=20.0,
@@ -110,7 +173,7 @@ class TrafficConfig:
 class LearningIntruder:
     """A learning aircraft that flies its airway from start to end as its goal."""
 
-    airway: int = _spec("index into 'airways'", 0, 63)
+    airway: int = _spec("index into 'airways'", 0, MAX_AIRWAYS - 1)
 
 
 @dataclass(frozen=True)
@@ -137,8 +200,17 @@ class RewardConfig:
 class ScenarioConfig:
     """One fully resolved scenario. Immutable; hashable by :meth:`config_hash`."""
 
-    id: str = _spec("stable scenario id, e.g. 'medium' or 'curriculum/stage-03'", default="")
-    description: str = _spec("one-line description", default="")
+    id: str = _spec(
+        "stable scenario id, e.g. 'medium' or 'curriculum/stage-03' (letters, digits, '._+-', "
+        f"parts separated by '/'; at most {MAX_NAME_CHARS} characters)",
+        name=True,
+        default="",
+    )
+    description: str = _spec(
+        f"one-line description (at most {MAX_TEXT_CHARS} characters)",
+        max_chars=MAX_TEXT_CHARS,
+        default="",
+    )
     version: int = _spec("bumped whenever a change alters results", 1, 10_000, default=1)
     sector: SectorConfig = _spec("sector geometry", default_factory=SectorConfig)
     time: TimeConfig = _spec("time step and horizon", default_factory=TimeConfig)
@@ -147,10 +219,20 @@ class ScenarioConfig:
         "ownship performance, start and goal", default_factory=OwnshipConfig
     )
     traffic: TrafficConfig = _spec("airway traffic", default_factory=TrafficConfig)
-    airways: tuple[Airway, ...] = _spec("the airway network", default=())
-    aircraft: tuple[Aircraft, ...] = _spec("explicitly placed background aircraft", default=())
+    airways: tuple[Airway, ...] = _spec(
+        f"the airway network, each crossing the sector (at most {MAX_AIRWAYS})",
+        max_items=MAX_AIRWAYS,
+        default=(),
+    )
+    aircraft: tuple[Aircraft, ...] = _spec(
+        f"explicitly placed background aircraft (at most {MAX_AIRCRAFT})",
+        max_items=MAX_AIRCRAFT,
+        default=(),
+    )
     learning_intruders: tuple[LearningIntruder, ...] = _spec(
-        "learning aircraft (agents intruder_0, intruder_1, ...)", default=()
+        f"learning aircraft (agents intruder_0, intruder_1, ...; at most {MAX_LEARNING_INTRUDERS})",
+        max_items=MAX_LEARNING_INTRUDERS,
+        default=(),
     )
     observation: ObservationConfig = _spec("observation layout", default_factory=ObservationConfig)
     reward: RewardConfig = _spec("reward weights", default_factory=RewardConfig)
@@ -174,7 +256,14 @@ class ScenarioConfig:
 
 
 # --------------------------------------------------------------------------------------------
-# Generic validation of a mapping against the dataclass schema
+# Generic validation of a mapping against the dataclass schema. Every problem of a mapping is
+# collected (path, message) and reported at once; cross-field checks run once every field is
+# valid.
+
+_INVALID: Any = object()
+"""What a conversion returns after recording a problem."""
+
+Problems = list[tuple[str, str]]
 
 
 def _type_name(tp: Any) -> str:
@@ -195,119 +284,243 @@ def _type_name(tp: Any) -> str:
     )
 
 
-def _convert(value: Any, tp: Any, source: str, path: str, meta: dict[str, Any]) -> Any:
+def name_problem(text: str) -> str | None:
+    """Why ``text`` is not a valid scenario id or registry name (None when it is).
+
+    One implementation for the ``id`` field, registry look-ups and ``extends:``.
+    """
+    if len(text) > MAX_NAME_CHARS:
+        return f"expected a name of at most {MAX_NAME_CHARS} characters, got {len(text)}"
+    if not _NAME.fullmatch(text):
+        return (
+            "expected letters, digits and '._+-' in '/'-separated parts, none starting with "
+            f"'.', got {short_repr(text)}"
+        )
+    return None
+
+
+def _text_problem(text: str, max_chars: int) -> str | None:
+    if len(text) > max_chars:
+        return f"expected at most {max_chars} characters, got {len(text)}"
+    bad = next((c for c in text if unicodedata.category(c) in _CONTROL_CATEGORIES), None)
+    if bad is not None:
+        return f"expected one line of printable text, got the character U+{ord(bad):04X}"
+    return None
+
+
+def _convert(value: Any, tp: Any, path: str, meta: dict[str, Any], problems: Problems) -> Any:
+    def bad(message: str) -> Any:
+        problems.append((path, message))
+        return _INVALID
+
     origin = typing.get_origin(tp)
     if origin in (Union, types.UnionType):
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
         non_none = [a for a in args if a is not type(None)]
-        return _convert(value, non_none[0], source, path, meta)
+        return _convert(value, non_none[0], path, meta, problems)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise ScenarioError(source, path, f"expected a mapping, got {value!r}")
-        return _build(tp, value, source, path)
+            return bad(f"expected a mapping, got {short_repr(value)}")
+        return _build(tp, value, path, problems)
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
-            raise ScenarioError(source, path, f"expected {_type_name(tp)}, got {value!r}")
+            return bad(f"expected {_type_name(tp)}, got {short_repr(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(
-                _convert(v, args[0], source, f"{path}[{i}]", {}) for i, v in enumerate(value)
-            )
-        if len(value) != len(args):
-            raise ScenarioError(source, path, f"expected {_type_name(tp)}, got {value!r}")
-        return tuple(
-            _convert(v, a, source, f"{path}[{i}]", meta)
-            for i, (v, a) in enumerate(zip(value, args, strict=True))
-        )
+            most = meta.get("max_items")
+            if most is not None and len(value) > most:
+                return bad(f"expected at most {most} items, got {len(value)}")
+            items = [
+                _convert(v, args[0], f"{path}[{i}]", {}, problems) for i, v in enumerate(value)
+            ]
+        else:
+            if len(value) != len(args):
+                return bad(f"expected {_type_name(tp)}, got {short_repr(value)}")
+            items = [
+                _convert(v, a, f"{path}[{i}]", meta, problems)
+                for i, (v, a) in enumerate(zip(value, args, strict=True))
+            ]
+        return _INVALID if any(v is _INVALID for v in items) else tuple(items)
     if tp is bool:
         if not isinstance(value, bool):
-            raise ScenarioError(source, path, f"expected true/false, got {value!r}")
+            return bad(f"expected true/false, got {short_repr(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ScenarioError(source, path, f"expected a string, got {value!r}")
-        return value
+            return bad(f"expected a string, got {short_repr(value)}")
+        if meta.get("name"):
+            problem = name_problem(value)
+        else:
+            problem = _text_problem(value, meta.get("max_chars", MAX_TEXT_CHARS))
+        return value if problem is None else bad(problem)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(source, path, f"expected an integer, got {value!r}")
-        out: float = value
+            return bad(f"expected an integer, got {short_repr(value)}")
     elif tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(source, path, f"expected a number, got {value!r}")
-        out = float(value)
-        if not math.isfinite(out):
-            raise ScenarioError(source, path, f"expected a finite number, got {value!r}")
+            return bad(f"expected a number, got {short_repr(value)}{_exponent_hint(value)}")
+        if isinstance(value, float) and not math.isfinite(value):
+            return bad(f"expected a finite number, got {short_repr(value)}")
     else:  # pragma: no cover - schema error, not user error
         raise TypeError(f"unsupported schema type {tp!r}")
     lo, hi = meta.get("min"), meta.get("max")
-    if (lo is not None and out < lo) or (hi is not None and out > hi):
-        raise ScenarioError(source, path, f"expected a value in [{lo}, {hi}], got {value!r}")
-    return out if tp is float else int(out)
+    # Compared before any conversion: Python compares a huge integer with a float exactly.
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        return bad(f"expected a value in [{lo}, {hi}], got {short_repr(value)}")
+    return float(value) if tp is float else int(value)
 
 
-def _build(cls: Any, data: dict[str, Any], source: str, prefix: str) -> Any:
+def _exponent_hint(value: Any) -> str:
+    """YAML 1.1 reads ``1e5`` and ``1.0e5`` as text: say so when a string is such a number."""
+    if isinstance(value, str) and len(value) < 40 and "e" in value.lower():
+        try:
+            float(value)
+        except ValueError:
+            return ""
+        return " (text: YAML reads an exponent only in the form 1.0e+5)"
+    return ""
+
+
+def _key_label(key: Any) -> str:
+    if isinstance(key, str) and key.isprintable() and len(key) <= MAX_QUOTED_CHARS:
+        return key
+    return short_repr(key)
+
+
+def _build(cls: Any, data: dict[Any, Any], prefix: str, problems: Problems) -> Any:
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
+    before = len(problems)
     for key in data:
         if key not in fields:
-            close = [k for k in fields if k.startswith(str(key)[:3])]
+            label = _key_label(key)
+            close = (
+                difflib.get_close_matches(key, list(fields), n=1) if isinstance(key, str) else []
+            )
             hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise ScenarioError(
-                source,
-                f"{prefix}.{key}" if prefix else str(key),
-                f"unknown key (allowed: {', '.join(sorted(fields))}){hint}",
+            problems.append(
+                (
+                    f"{prefix}.{label}" if prefix else label,
+                    f"unknown key (allowed: {', '.join(sorted(fields))}){hint}",
+                )
             )
     kwargs = {}
     for name, f in fields.items():
         path = f"{prefix}.{name}" if prefix else name
         if name in data:
-            kwargs[name] = _convert(data[name], hints[name], source, path, dict(f.metadata))
+            kwargs[name] = _convert(data[name], hints[name], path, dict(f.metadata), problems)
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ScenarioError(source, path, f"missing required field ({_type_name(hints[name])})")
-    return cls(**kwargs)
+            problems.append((path, f"missing required field ({_type_name(hints[name])})"))
+    return _INVALID if len(problems) > before else cls(**kwargs)
 
 
 def from_mapping(data: dict[str, Any], source: str = "") -> ScenarioConfig:
-    """Build and cross-check a :class:`ScenarioConfig` from a plain mapping."""
+    """Build and cross-check a :class:`ScenarioConfig` from a plain mapping.
+
+    Raises :class:`ScenarioError` carrying every problem found: first those of single fields
+    (unknown keys, types, ranges, sizes), else those between fields (geometry, speeds).
+    """
     if not isinstance(data, dict):
-        raise ScenarioError(source, "", f"expected a mapping at the top level, got {data!r}")
-    cfg: ScenarioConfig = _build(ScenarioConfig, data, source, "")
-    _cross_check(cfg, source)
+        raise ScenarioError(
+            source, "", f"expected a mapping at the top level, got {short_repr(data)}"
+        )
+    problems: Problems = []
+    cfg: ScenarioConfig = _build(ScenarioConfig, data, "", problems)
+    if not problems:
+        problems = _cross_problems(cfg)
+    if problems:
+        raise ScenarioError.of(source, problems)
     return cfg
 
 
-def _cross_check(cfg: ScenarioConfig, source: str) -> None:
-    o = cfg.ownship
+def _inside(p: Point, size: float) -> bool:
+    return 0.0 <= p[0] <= size and 0.0 <= p[1] <= size
+
+
+def _length_inside(a: Airway, size: float) -> float:
+    """Length (km) of the part of the airway inside the sector [0, size]^2 (Liang-Barsky)."""
+    (x0, y0), (x1, y1) = a.start_km, a.end_km
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-dx, x0), (dx, size - x0), (-dy, y0), (dy, size - y0)):
+        if p == 0.0:
+            if q < 0.0:
+                return 0.0
+            continue
+        t = q / p
+        if p < 0.0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+    return max(0.0, t1 - t0) * math.hypot(dx, dy)
+
+
+def _cross_problems(cfg: ScenarioConfig) -> Problems:
+    """Checks between fields: speeds, and a geometry that fits the sector (so that ``reset``
+    never meets a scenario it cannot start)."""
+    out: Problems = []
+    o, size = cfg.ownship, cfg.sector.size_km
+    half = f"expected less than half of sector.size_km ({size / 2:g} km)"
     if o.min_speed_kt > o.max_speed_kt:
-        raise ScenarioError(source, "ownship.min_speed_kt", "expected min_speed_kt <= max_speed_kt")
-    if not o.min_speed_kt <= o.speed_kt <= o.max_speed_kt:
-        raise ScenarioError(
-            source, "ownship.speed_kt", f"expected a value in [{o.min_speed_kt}, {o.max_speed_kt}]"
-        )
-    if 2 * o.goal_margin_km >= cfg.sector.size_km:
-        raise ScenarioError(
-            source, "ownship.goal_margin_km", "expected less than half of sector.size_km"
-        )
+        out.append(("ownship.min_speed_kt", "expected min_speed_kt <= max_speed_kt"))
+    else:
+        bounds = f"expected a value in [{o.min_speed_kt}, {o.max_speed_kt}] (min/max_speed_kt)"
+        if not o.min_speed_kt <= o.speed_kt <= o.max_speed_kt:
+            out.append(("ownship.speed_kt", bounds))
+        if o.start is not None and not o.min_speed_kt <= o.start.speed_kt <= o.max_speed_kt:
+            out.append(("ownship.start.speed_kt", bounds))
+    for name in ("goal_margin_km", "start_clearance_km", "goal_radius_km"):
+        if 2 * getattr(o, name) >= size:
+            out.append((f"ownship.{name}", half))
+    if 2 * cfg.traffic.spawn_clearance_km >= size:
+        out.append(("traffic.spawn_clearance_km", half))
     if cfg.separation.nmac_km > cfg.separation.los_km:
-        raise ScenarioError(source, "separation.nmac_km", "expected nmac_km <= los_km")
+        out.append(("separation.nmac_km", "expected nmac_km <= los_km"))
     if cfg.traffic.routes > len(cfg.airways):
-        raise ScenarioError(
-            source, "traffic.routes", f"expected at most {len(cfg.airways)} (the number of airways)"
+        out.append(
+            ("traffic.routes", f"expected at most {len(cfg.airways)} (the number of airways)")
         )
     for i, li in enumerate(cfg.learning_intruders):
         if li.airway >= len(cfg.airways):
-            raise ScenarioError(
-                source,
-                f"learning_intruders[{i}].airway",
-                f"expected an index below {len(cfg.airways)}",
+            out.append(
+                (f"learning_intruders[{i}].airway", f"expected an index below {len(cfg.airways)}")
             )
     for i, a in enumerate(cfg.airways):
         if math.dist(a.start_km, a.end_km) < 1.0:
-            raise ScenarioError(source, f"airways[{i}]", "expected distinct start and end")
-    if o.start is not None and o.goal_km is None:
-        raise ScenarioError(source, "ownship.goal_km", "expected a goal when 'start' is given")
+            out.append((f"airways[{i}]", "expected distinct start and end"))
+        elif _length_inside(a, size) < 1.0:
+            out.append(
+                (f"airways[{i}]", f"expected an airway crossing the sector [0, {size:g}] km")
+            )
+    inside = f"expected a point inside the sector [0, {size:g}] km"
+    for i, ac in enumerate(cfg.aircraft):
+        if not _inside(ac.position_km, size):
+            out.append((f"aircraft[{i}].position_km", inside))
+    if o.goal_km is not None and not _inside(o.goal_km, size):
+        out.append(("ownship.goal_km", inside))
+    if o.start is None:
+        if o.goal_km is not None:
+            out.append(("ownship.goal_km", "expected no goal without an explicit 'start'"))
+        return out
+    if o.goal_km is None:
+        out.append(("ownship.goal_km", "expected a goal when 'start' is given"))
+    if not _inside(o.start.position_km, size):
+        out.append(("ownship.start.position_km", inside))
+    for i, ac in enumerate(cfg.aircraft):
+        if (
+            ac.level == o.start.level
+            and math.dist(ac.position_km, o.start.position_km) < cfg.separation.nmac_km
+        ):
+            out.append(
+                (
+                    f"aircraft[{i}].position_km",
+                    f"expected at least separation.nmac_km ({cfg.separation.nmac_km:g} km) from "
+                    "the ownship's start at its level (an NMAC before the first step)",
+                )
+            )
+    return out
 
 
 def _inner_dataclass(tp: Any) -> tuple[Any, str]:
