@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from cdr_bench.actions import HOLD, N_ACTIONS
+from cdr_bench.errors import ActionError, ArgumentError, short_repr
 from cdr_bench.scenarios import ScenarioConfig
 from cdr_bench.sim import OUTCOME_NAMES, REWARD_TERMS, StepResult
 from cdr_bench.vector_env import VectorEnv
@@ -50,8 +52,11 @@ class CDREnv(ParallelEnv):
     [330, 530] kt), level +-1. 13 is *hold*. See :mod:`cdr_bench.actions`. The action is applied at
     the start of the step. ``action_mask`` flags climbing at level 2 and descending at level 0 as
     infeasible; a masked action does not crash the env: its level change is not executed (the
-    heading and speed parts are) and ``infos[agent]["invalid_action"]`` is True. A value outside
-    0..26, or not an integer, raises ``ValueError`` naming the agent and the value.
+    heading and speed parts are) and ``infos[agent]["invalid_action"]`` is True. ``step`` takes a
+    dict with one action per live agent: a Python or numpy integer (or 0-d integer array) in
+    0..26. A value outside 0..26 or not such an integer, a missing live agent and a key that is
+    not an agent of the env raise ``cdr_bench.errors.ActionError`` (a ``ValueError``) naming the
+    agent and the value; actions for agents that already finished are ignored.
 
     ## Observation Space
 
@@ -174,9 +179,9 @@ class CDREnv(ParallelEnv):
         **overrides: Any,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
+            raise ArgumentError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                f"got {render_mode!r}"
+                f"got {short_repr(render_mode)}"
             )
         if render_mode == "human":
             try:
@@ -232,12 +237,12 @@ class CDREnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, dict[str, Any]]]:
+        episode_seed = _check_reset_args(seed, options)
         if seed is not None:
             self._seed_stream = np.random.default_rng(seed)
             for i, a in enumerate(self.possible_agents):
                 self.action_spaces[a].seed(seed + i)
                 self.observation_spaces[a].seed(seed + i)
-        episode_seed = (options or {}).get("episode_seed")
         if episode_seed is None:
             episode_seed = int(self._seed_stream.integers(2**63))
         self.episode_seed = int(episode_seed)
@@ -257,10 +262,21 @@ class CDREnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
         act = self._hold.copy()
+        if type(actions) is not dict and not isinstance(actions, Mapping):
+            raise ActionError(
+                f"step() takes a dict of agent id -> action, got {short_repr(actions)} of type "
+                f"{type(actions).__name__}"
+            )
+        if not actions.keys() <= self._index.keys():
+            key = next(k for k in actions if k not in self._index)
+            raise ActionError(
+                f"unknown agent {short_repr(key)} in the actions of step() (agents: "
+                f"{', '.join(self.possible_agents)})"
+            )
         for agent in self.agents:
             if agent not in actions:
-                raise ValueError(f"missing action for live agent {agent!r}")
-            act[0, self._index[agent]] = _check_action(agent, actions[agent])
+                raise ActionError(f"missing action for live agent {agent!r}")
+            act[0, self._index[agent]] = check_action(agent, actions[agent])
         acting = self.agents
         out = self.vector.step(act)
         res = out.result
@@ -364,21 +380,58 @@ class CDREnv(ParallelEnv):
             self._renderer = None
 
 
-def _check_action(agent: str, value: Any) -> int:
-    """An integer action in 0..26, or ValueError naming the agent and the value."""
+def check_action(agent: str, value: Any) -> int:
+    """The action of ``agent`` as an int in 0..26: a Python or numpy integer or a 0-d integer
+    array. Anything else raises :class:`~cdr_bench.errors.ActionError` naming the agent and the
+    value. The one check of a single action (the Gymnasium ``Ownship-v0`` steps through it)."""
     if type(value) is int and 0 <= value < N_ACTIONS:  # the common case, checked first
         return value
     v = value
-    if isinstance(v, np.ndarray) and v.size == 1:
-        v = v.reshape(()).item() if np.issubdtype(v.dtype, np.integer) else v.reshape(())[()]
+    if isinstance(v, np.ndarray):
+        if v.ndim != 0:
+            raise ActionError(
+                f"action for agent {agent!r} must be one integer in 0..{N_ACTIONS - 1}, got an "
+                f"array of shape {v.shape}: {short_repr(value)}"
+            )
+        v = v[()]
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral):
-        raise ValueError(
-            f"action for agent {agent!r} must be an integer in 0..{N_ACTIONS - 1}, got {value!r} "
-            f"of type {type(value).__name__}"
+        raise ActionError(
+            f"action for agent {agent!r} must be an integer in 0..{N_ACTIONS - 1}, got "
+            f"{short_repr(value)} of type {type(value).__name__}"
         )
-    if not 0 <= int(v) < N_ACTIONS:
-        raise ValueError(f"action for agent {agent!r} must be in 0..{N_ACTIONS - 1}, got {int(v)}")
-    return int(v)
+    iv = int(v)
+    if not 0 <= iv < N_ACTIONS:
+        raise ActionError(
+            f"action for agent {agent!r} must be in 0..{N_ACTIONS - 1}, got {short_repr(iv)}"
+        )
+    return iv
+
+
+def _check_reset_args(seed: Any, options: Any) -> int | None:
+    """Check ``reset``'s arguments; the episode seed of ``options`` (None when not given)."""
+    if seed is not None and (
+        isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0
+    ):
+        raise ArgumentError(
+            f"reset(seed=...) expects None or an integer >= 0, got {short_repr(seed)}"
+        )
+    if options is None:
+        return None
+    if not isinstance(options, Mapping):
+        raise ArgumentError(f"reset(options=...) expects None or a dict, got {short_repr(options)}")
+    episode_seed = options.get("episode_seed")
+    if episode_seed is None:
+        return None
+    if (
+        isinstance(episode_seed, (bool, np.bool_))
+        or not isinstance(episode_seed, numbers.Integral)
+        or not 0 <= int(episode_seed) < 2**64
+    ):
+        raise ArgumentError(
+            "reset(options={'episode_seed': ...}) expects an integer in 0..2**64-1, got "
+            f"{short_repr(episode_seed)}"
+        )
+    return int(episode_seed)
 
 
 def parallel_env(

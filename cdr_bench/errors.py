@@ -62,6 +62,17 @@ class ScenarioError(UserError, ValueError):
         return cls(source, path, message, more=more)
 
 
+class ArgumentError(UserError, ValueError):
+    """An argument of an environment call (constructor, ``reset``, ``step``) is invalid; the
+    message names the argument, what was expected and (shortened) what was given."""
+
+
+class ActionError(ArgumentError):
+    """An action given to an environment's ``step`` is invalid: an unknown agent, a missing
+    action, or a value that is not an integer in 0..26. The message names the agent and the
+    value."""
+
+
 def _field_part(path: str) -> str:
     return f"field '{path}': " if path else ""
 

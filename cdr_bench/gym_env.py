@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.env import CDREnv
+from cdr_bench.errors import ActionError, short_repr
 from cdr_bench.scenarios import ScenarioConfig
 from cdr_bench.sim import OUTCOME_NAMES
 from cdr_bench.vector_env import VectorEnv
@@ -139,13 +140,17 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
     ) -> tuple[
         NDArray[np.float32], NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict
     ]:
-        a = np.asarray(actions)
+        try:
+            a = np.asarray(actions)
+        except (ValueError, TypeError):  # ragged nested lists
+            a = np.empty(0)
         if a.shape != (self.num_envs,) or not np.issubdtype(a.dtype, np.integer):
-            raise ValueError(
-                f"expected {self.num_envs} integer actions in 0..{N_ACTIONS - 1}, got {a!r}"
+            raise ActionError(
+                f"expected {self.num_envs} integer actions in 0..{N_ACTIONS - 1}, got "
+                f"{short_repr(actions)}"
             )
         if a.size and (a.min() < 0 or a.max() >= N_ACTIONS):
-            raise ValueError(f"actions must be in 0..{N_ACTIONS - 1}, got {a.tolist()}")
+            raise ActionError(f"actions must be in 0..{N_ACTIONS - 1}, got {short_repr(a)}")
         self._actions[:, 0] = a
         out = self.vector.step(self._actions)
         res = out.result

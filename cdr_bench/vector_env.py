@@ -32,12 +32,22 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS
+from cdr_bench.errors import ArgumentError, short_repr
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import Simulator, StepResult, observation_bounds
 from cdr_bench.sim.core import TIMEOUT
 
 SEED_BOUND = 2**63
 """Episode seeds drawn from a stream are integers in 0..2**63-1."""
+
+
+def _is_int(value: object, least: int) -> bool:
+    """A Python or numpy integer (not a bool) >= ``least``."""
+    return (
+        isinstance(value, (int, np.integer))
+        and not isinstance(value, (bool, np.bool_))
+        and bool(value >= least)
+    )
 
 
 def agent_ids(config: ScenarioConfig) -> list[str]:
@@ -132,6 +142,13 @@ class VectorEnv:
         seed: int | None = None,
         **overrides: Any,
     ):
+        if not _is_int(num_envs, 1):
+            raise ArgumentError(f"num_envs must be an integer >= 1, got {short_repr(num_envs)}")
+        if not isinstance(autoreset, (bool, np.bool_)):
+            raise ArgumentError(f"autoreset must be True or False, got {short_repr(autoreset)}")
+        if seed is not None and not _is_int(seed, 0):
+            raise ArgumentError(f"seed must be None or an integer >= 0, got {short_repr(seed)}")
+        num_envs = int(num_envs)
         self.config = load_scenario(scenario, **overrides)
         self.sim = Simulator(self.config, n_episodes=num_envs)
         self.num_envs = num_envs

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 import cdr_bench
 from cdr_bench import actions
+from cdr_bench.errors import ActionError, ArgumentError
 from cdr_bench.sim import REWARD_TERMS
+from cdr_bench.vector_env import VectorEnv
 
 
 def test_agents_and_spaces():
@@ -65,8 +69,84 @@ def test_numpy_integer_actions_accepted():
     env = cdr_bench.parallel_env("low")
     env.reset(seed=0)
     env.step({"ownship_0": np.int64(13)})
+    env.step({"ownship_0": np.uint8(13)})
     env.step({"ownship_0": np.array(13)})
-    env.step({"ownship_0": np.array([13])})
+
+
+@pytest.mark.parametrize(
+    ("actions", "expect"),
+    [
+        ({"ownship_0": np.array([13])}, "array of shape (1,)"),
+        ({"ownship_0": np.array([[13]])}, "array of shape (1, 1)"),
+        ({"ownship_0": [13]}, "got [13] of type list"),
+        ({"ownship_0": np.float64(13.0)}, "must be an integer"),
+        ({"ownship_0": 2**70}, "must be in 0..26"),
+        ({"ownship_0": 13, "bogus": 5}, "unknown agent 'bogus'"),
+        ({"ownship_0": 13, 0: 13}, "unknown agent 0"),
+        ({"intruder_0": 13}, "unknown agent 'intruder_0'"),  # "low" has no learning intruders
+        ({}, "missing action for live agent 'ownship_0'"),
+        (13, "takes a dict of agent id -> action"),
+        ([("ownship_0", 13)], "takes a dict"),
+        (None, "takes a dict"),
+    ],
+)
+def test_step_rejects_bad_actions_with_the_documented_error(actions, expect):
+    env = cdr_bench.parallel_env("low")
+    env.reset(seed=0)
+    with pytest.raises(ActionError) as ei:
+        env.step(actions)
+    assert isinstance(ei.value, ValueError) and expect in str(ei.value)
+    assert env.step({"ownship_0": 13})[4]["ownship_0"]["step"] == 1  # the bad call did nothing
+
+
+def test_actions_of_finished_agents_are_ignored():
+    env = cdr_bench.parallel_env("marl/low-2")
+    env.reset(seed=0)
+    while len(env.agents) == len(env.possible_agents):
+        env.step({a: 13 for a in env.agents})
+    if env.agents:
+        env.step({a: 13 for a in env.possible_agents})
+
+
+def test_a_huge_value_is_quoted_short():
+    env = cdr_bench.parallel_env("low")
+    env.reset(seed=0)
+    with pytest.raises(ActionError) as ei:
+        env.step({"ownship_0": list(range(100_000))})
+    assert len(str(ei.value)) < 250
+
+
+@pytest.mark.parametrize(
+    ("call", "expect"),
+    [
+        (lambda: cdr_bench.parallel_env("low").reset(seed="x"), "reset(seed=...)"),
+        (lambda: cdr_bench.parallel_env("low").reset(seed=-1), "reset(seed=...)"),
+        (lambda: cdr_bench.parallel_env("low").reset(options=[1]), "reset(options=...)"),
+        (
+            lambda: cdr_bench.parallel_env("low").reset(options={"episode_seed": 2**64}),
+            "episode_seed",
+        ),
+        (lambda: cdr_bench.parallel_env("low", render_mode="ascii"), "render_mode"),
+        (lambda: VectorEnv("low", num_envs=0), "num_envs"),
+        (lambda: VectorEnv("low", num_envs="4"), "num_envs"),
+        (lambda: VectorEnv("low", num_envs=True), "num_envs"),
+        (lambda: VectorEnv("low", seed=1.5), "seed"),
+        (lambda: VectorEnv("low", autoreset="yes"), "autoreset"),
+    ],
+)
+def test_bad_env_arguments_raise_argument_errors(call, expect):
+    with pytest.raises(ArgumentError, match=re.escape(expect)):
+        call()
+
+
+@pytest.mark.parametrize("bad", [[[1, 2], [3]], [13, 13, 13], [1.0, 2.0], "ab", {"a": 1}, [27, 0]])
+def test_gymnasium_vector_env_rejects_bad_actions(bad):
+    from cdr_bench.gym_env import OwnshipVectorEnv
+
+    env = OwnshipVectorEnv(num_envs=2, scenario="low")
+    env.reset(seed=0)
+    with pytest.raises(ActionError):
+        env.step(bad)
 
 
 def test_infos_carry_named_terms_that_sum_to_reward_and_outcome_at_end():
