@@ -54,6 +54,13 @@ def register(sub: Any) -> None:
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--max-frames", type=int, default=400)
     r.add_argument("--fps", type=int, default=8)
+    r.add_argument(
+        "--zoom-km",
+        type=float,
+        default=None,
+        help="show this many km around the ownship (default: the encounter in tactical "
+        "scenarios, the whole sector otherwise; inf: the whole sector)",
+    )
     from cdr_bench.evaluate.cli import add_agent_args
 
     add_agent_args(r)
@@ -114,6 +121,10 @@ def _render(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".gif":
         raise UserError(f"--out {args.out}: expected a .gif path")
     env = CDREnv(args.scenario, render_mode="rgb_array")
+    if args.zoom_km is not None:
+        if not args.zoom_km > 0:
+            raise UserError(f"--zoom-km: expected a number of km > 0 (or inf), got {args.zoom_km}")
+        env.render_zoom_km = args.zoom_km
     policy: Any = None
     if args.agent is not None:
         from cdr_bench.evaluate.cli import agent_options

@@ -147,7 +147,11 @@ class CDREnv(ParallelEnv):
     ``reset(seed=None, options=None)``: a seed fixes the episode (traffic, start, goal) and seeds
     every agent's action space; later unseeded resets continue the seeded stream.
     ``options={"episode_seed": s}`` sets the simulator seed directly. ``render_mode``:
-    ``"rgb_array"`` (H x W x 3 uint8 top-down picture) or ``"human"`` (matplotlib window).
+    ``"rgb_array"`` (512 x 512 x 3 uint8 top-down picture with legend, scale bar, time and
+    outcome) or ``"human"`` (matplotlib window). The picture zooms to the encounter in scenarios
+    that place aircraft around the ownship (the tactical ones) and shows the whole sector
+    otherwise; the attribute ``render_zoom_km`` (``None``: that choice; a number: that many km
+    around the ownship; ``math.inf``: the whole sector) overrides it.
 
     ## Departures from the paper (decided here)
 
@@ -194,6 +198,7 @@ class CDREnv(ParallelEnv):
         self.vector = VectorEnv(scenario, num_envs=1, **overrides)
         self.config = self.vector.config
         self.render_mode = render_mode
+        self.render_zoom_km: float | None = None
         self.possible_agents = list(self.vector.agent_ids)
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
@@ -364,7 +369,9 @@ class CDREnv(ParallelEnv):
             return None
         from cdr_bench.render import draw_frame
 
-        frame = draw_frame(self.vector.sim, self._trail, self._last_result)
+        frame = draw_frame(
+            self.vector.sim, self._trail, self._last_result, zoom_km=self.render_zoom_km
+        )
         if self.render_mode == "rgb_array":
             return frame
         from cdr_bench.render import HumanWindow

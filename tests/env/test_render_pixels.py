@@ -149,3 +149,14 @@ def test_whole_sector_without_an_explicit_encounter():
     assert render.encounter_box(cdr_bench.parallel_env(SCENARIO).config) is not None
     frame = env.render()
     assert frame.shape == (render.SIZE_PX, render.SIZE_PX, 3)
+
+
+def test_env_render_zoom_attribute():
+    env = cdr_bench.parallel_env("tactical/head-on", render_mode="rgb_array")
+    env.reset(seed=0)
+    auto = env.render()
+    env.render_zoom_km = math.inf
+    whole = env.render()
+    env.render_zoom_km = None
+    assert np.array_equal(env.render(), auto)
+    assert not np.array_equal(whole, auto)
