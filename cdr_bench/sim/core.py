@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS, action_mask
+from cdr_bench.errors import ScenarioError
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim import kernels as k
 from cdr_bench.sim.geometry import exact_unit_vector, heading_deg
@@ -308,9 +309,11 @@ class Simulator:
             raise ValueError(f"expected {idx.shape[0]} seeds, got {seed_arr.shape[0]}")
         failed = k.reset_episodes(idx, seed_arr, self.state, self.constants)
         if failed >= 0:
-            raise RuntimeError(
-                f"scenario {self.config.id!r}: no start with the required clearance found in 200 "
-                f"draws (seed {int(seed_arr[failed])})"
+            raise ScenarioError(
+                self.config.id,
+                "ownship.start_clearance_km",
+                f"no start with this clearance found in 200 draws (seed {int(seed_arr[failed])}): "
+                "the sector is too crowded; lower it, or use fewer traffic.routes / per_route",
             )
 
     def step(self, actions: NDArray[np.integer]) -> StepResult:

@@ -128,8 +128,8 @@ def _run(cfg: Any) -> None:
     sim = Simulator(cfg, 1)
     try:
         sim.reset([7])
-    except RuntimeError as e:  # a valid but crowded scenario: no clear start (not a geometry bug)
-        assert "no start with the required clearance" in str(e)
+    except ScenarioError as e:  # a valid but crowded scenario: no clear start (not a geometry bug)
+        assert "no start with this clearance" in str(e)
         return
     sim.step(np.full((1, sim.M), HOLD))
     assert np.isfinite(sim.pos_km).all()
