@@ -222,6 +222,7 @@ def test_build_refuses_results_on_other_episodes(repo: Path) -> None:
         "7",
         "--out",
         "leaderboard/results/direct.json",
+        "--force",
         "--no-progress",
         cwd=repo,
     )
