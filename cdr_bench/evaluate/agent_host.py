@@ -130,9 +130,21 @@ class Host:
     # framing --------------------------------------------------------------------------------
 
     def read_exact(self, n: int) -> bytes:
+        import select
+        import time
+
+        from cdr_bench.evaluate.remote import SPIN_S
+
         buf = bytearray()
+        fd = self.rfile.fileno()
+        spin_until = time.perf_counter() + SPIN_S
         while len(buf) < n:
-            chunk = self.rfile.read(n - len(buf))
+            try:
+                chunk = os.read(fd, n - len(buf))
+            except BlockingIOError:  # poll briefly, then sleep until the next request
+                if time.perf_counter() >= spin_until:
+                    select.select([fd], [], [])
+                continue
             if not chunk:
                 raise EOFError
             buf += chunk
@@ -238,6 +250,7 @@ def main() -> int:
         return 2
     # The protocol owns the original stdin/stdout; the agent's prints go to stderr.
     rfile = os.fdopen(os.dup(0), "rb", buffering=0)
+    os.set_blocking(rfile.fileno(), False)
     wfile = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     devnull = os.open(os.devnull, os.O_RDONLY)
