@@ -16,7 +16,7 @@ from typing import Any
 from cdr_bench import actions
 from cdr_bench.scenarios import ScenarioConfig, ScenarioError, list_scenarios, load_scenario
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
     # Bound eagerly: the function `env` must shadow the submodule `cdr_bench.env`.

@@ -132,12 +132,14 @@ class CDREnv(ParallelEnv):
     * ``nmac``: an NMAC during the step (always ends the agent's episode);
     * ``los``: a LoS during the step, only where ``separation.los_terminates`` (curriculum and
       tactical scenarios);
-    * ``boundary``: outside the sector, only where ``sector.boundary_terminates``.
+    * ``boundary``: more than ``sector.boundary_margin_km`` (50 km) outside the sector.
 
     Priority within one step: nmac > los > boundary > success (a step that reaches the goal and
     also loses separation that ends the episode is a failure). Truncation: ``timeout`` when
     ``max_steps`` (1000) is reached. ``infos[agent]["outcome"]`` names the outcome on the agent's
-    last step. Leaving the sector is penalised but does not end the episode by default.
+    last step. Leaving the sector is penalised every step outside; the margin bounds every
+    return (docs/model.md §6), and ``sector={"boundary_margin_km": None}`` restores the paper's
+    soft boundary (never ends; unbounded path penalty).
 
     ## Arguments
 
@@ -167,6 +169,9 @@ class CDREnv(ParallelEnv):
     * v0 (scenario version 2, cdr-bench 0.2.0): the same model on one compiled simulator; new
       episode streams (splitmix64) and headings carried as exactly rotated unit vectors, so every
       episode differs from version 1 (docs/model.md §12).
+    * v0 (scenario version 3, cdr-bench 0.3.0): a controlled aircraft 50 km beyond the sector
+      ends its episode as ``boundary`` (returns bounded; the paper's soft boundary is
+      ``boundary_margin_km: null``); new config hashes, hence new episode seeds.
     """
 
     metadata: dict[str, Any] = {

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.sim.core import LOS, NMAC, SUCCESS, StepResult
+from cdr_bench.sim.core import BOUNDARY, LOS, NMAC, SUCCESS, StepResult
 from cdr_bench.vector_env import VectorEnv
 
 N_STAGES = 12
@@ -108,9 +108,9 @@ class CurriculumEnv:
     Training-only departures from the benchmark's environment (0 turns each off):
 
     * ``failure_penalty`` (>= 0) is subtracted from the reward of an aircraft whose flight ends
-      in LoS or NMAC. With the paper's reward the path term (-(d_goal/400 km)^2 per step) sums
-      to several units over a crossing, far more than the -0.5 of a LoS that ends a curriculum
-      episode, so a literal agent is paid to end episodes by conflict.
+      in LoS, NMAC or ``boundary``. With the paper's reward the path term (-(d_goal/400 km)^2
+      per step) sums to several units over a crossing, far more than the -0.5 of a LoS that
+      ends a curriculum episode, so a literal agent is paid to end episodes by conflict.
     * ``max_episode_steps`` ends an episode after that many steps
       (:meth:`VectorEnv.end_episodes`: the aircraft still flying get the ``timeout`` outcome and
       a truncation, which bootstraps).
@@ -183,7 +183,8 @@ class CurriculumEnv:
         env, sim = self.env, self.env.sim
         st = env.step(actions)
         res = st.result
-        penalty = self.failure_penalty * ((res.outcome == LOS) | (res.outcome == NMAC))
+        failed = (res.outcome == LOS) | (res.outcome == NMAC) | (res.outcome == BOUNDARY)
+        penalty = self.failure_penalty * failed
         truncated = st.truncated
         if self.max_episode_steps:
             cut = np.flatnonzero((sim.steps >= self.max_episode_steps) & sim.ac_active.any(axis=1))

@@ -95,9 +95,12 @@ class Aircraft:
 @dataclass(frozen=True)
 class SectorConfig:
     size_km: float = _spec("side of the square sector in km", 10.0, 5000.0, default=400.0)
-    boundary_terminates: bool = _spec(
-        "end the episode (outcome 'boundary') when a controlled aircraft leaves the sector",
-        default=False,
+    boundary_margin_km: float | None = _spec(
+        "a controlled aircraft farther than this outside the sector ends its episode (outcome "
+        "'boundary'); 0: on leaving; null: never (the paper's soft boundary)",
+        0.0,
+        1000.0,
+        default=50.0,
     )
 
 

@@ -208,7 +208,10 @@ class Simulator:
             (k.P_START_CLEARANCE, o.start_clearance_km),
             (k.P_START_SPEED, o.speed_kt),
             (k.P_LOS_TERMINATES, float(cfg.separation.los_terminates)),
-            (k.P_BOUNDARY_TERMINATES, float(cfg.sector.boundary_terminates)),
+            (
+                k.P_BOUNDARY_MARGIN,
+                np.inf if cfg.sector.boundary_margin_km is None else cfg.sector.boundary_margin_km,
+            ),
             (k.P_MAX_STEPS, float(self.max_steps)),
         ):
             fp[index] = value

@@ -90,7 +90,7 @@ N_FLAGS = 6
     P_START_CLEARANCE,
     P_START_SPEED,
     P_LOS_TERMINATES,
-    P_BOUNDARY_TERMINATES,
+    P_BOUNDARY_MARGIN,
     P_MAX_STEPS,
 ) = range(28)
 N_FLOAT_PARAMS = 28
@@ -633,7 +633,8 @@ def step_episodes(actions, s, c, o):
             x, y = s.pos[e, i, 0], s.pos[e, i, 1]
             out = x < 0.0 or x > size or y < 0.0 or y > size
             code = SUCCESS if o.flags[e, m, F_REACHED] else RUNNING
-            if out and c.fp[P_BOUNDARY_TERMINATES] != 0.0:
+            margin = c.fp[P_BOUNDARY_MARGIN]  # inf: the boundary never ends the episode
+            if x < -margin or x > size + margin or y < -margin or y > size + margin:
                 code = BOUNDARY
             if n_los[m] > 0 and c.fp[P_LOS_TERMINATES] != 0.0:
                 code = LOS
