@@ -183,11 +183,15 @@ def episodes(path: Path) -> list[dict]:
     return rows
 
 
-@pytest.mark.parametrize("name", sorted(SILENT_ATTACKS))
-def test_silent_attack_has_no_effect(repo: Path, tmp_path: Path, name: str) -> None:
+def test_silent_attacks_have_no_effect(repo: Path, tmp_path: Path) -> None:
+    """One agent runs every silent attack at import (one build, to keep CI short); each is
+    written so that, should it succeed, the build fails or the scores or files change."""
     secret = tmp_path / "secret.txt"
     secret.write_text("TOP-SECRET")
-    add_evil(repo, SILENT_ATTACKS[name], secret)
+    attacks = "\n".join(
+        f"# --- {name}\n" + textwrap.dedent(code) for name, code in SILENT_ATTACKS.items()
+    )
+    add_evil(repo, attacks, secret)
     before = tree(repo)
     code, err = build(repo)
     assert code == 0, err
@@ -199,7 +203,7 @@ def test_silent_attack_has_no_effect(repo: Path, tmp_path: Path, name: str) -> N
     allowed_prefixes = ("leaderboard/results/evil.", "leaderboard/plots/")
     allowed = {"leaderboard/README.md", "leaderboard/index.html", "leaderboard/leaderboard.json"}
     unexpected = [k for k in changed if not k.startswith(allowed_prefixes) and k not in allowed]
-    assert not unexpected, f"{name}: files changed: {unexpected}"
+    assert not unexpected, f"files changed: {unexpected}"
     # the entry scores exactly as the honest agent it wraps
     assert episodes(results / "evil.jsonl") == episodes(results / "direct.jsonl")
     evil = json.loads((results / "evil.json").read_text())
