@@ -18,6 +18,24 @@ from cdr_bench.scenarios import ScenarioConfig, ScenarioError, list_scenarios, l
 
 __version__ = "0.3.0"
 
+GYMNASIUM_TASKS: list[tuple[str, dict[str, Any], int | None]] = [
+    ("cdr_bench/Ownship-v0", {}, None),  # any scenario: make(..., scenario="high")
+    ("cdr_bench/Low-v0", {"scenario": "low"}, 1000),
+    ("cdr_bench/Medium-v0", {"scenario": "medium"}, 1000),
+    ("cdr_bench/High-v0", {"scenario": "high"}, 1000),
+    ("cdr_bench/HeadOn-v0", {"scenario": "tactical/head-on"}, 60),
+    ("cdr_bench/Crossing-v0", {"scenario": "tactical/crossing"}, 60),
+    ("cdr_bench/Overtaking-v0", {"scenario": "tactical/overtaking"}, 60),
+    *(
+        (f"cdr_bench/CurriculumStage{i:02d}-v0", {"scenario": f"curriculum/stage-{i:02d}"}, 1000)
+        for i in range(1, 13)
+    ),
+]
+"""Gymnasium ids registered on import (the ownship's task; learning intruders, if any, hold):
+one per shipped single-agent task, ``max_episode_steps`` = the scenario's horizon (the env also
+ends the episode there, as ``timeout``). ``-v0`` is scenario version 3; an id's version goes up
+whenever its scenario's does. Multi-agent scenarios (``marl/*``) are PettingZoo tasks."""
+
 try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
     # Bound eagerly: the function `env` must shadow the submodule `cdr_bench.env`.
     from cdr_bench.env import CDREnv, env, parallel_env
@@ -31,12 +49,15 @@ except ImportError as _e:  # pragma: no cover - simulator-only interpreter
 else:
     import gymnasium as _gym
 
-    if "cdr_bench/Ownship-v0" not in _gym.registry:
-        _gym.register(
-            id="cdr_bench/Ownship-v0",
-            entry_point="cdr_bench.gym_env:OwnshipEnv",
-            vector_entry_point="cdr_bench.gym_env:OwnshipVectorEnv",
-        )
+    for _id, _kwargs, _steps in GYMNASIUM_TASKS:
+        if _id not in _gym.registry:
+            _gym.register(
+                id=_id,
+                entry_point="cdr_bench.gym_env:OwnshipEnv",
+                vector_entry_point="cdr_bench.gym_env:OwnshipVectorEnv",
+                max_episode_steps=_steps,
+                kwargs=_kwargs,
+            )
 
 __all__ = [
     "CDREnv",

@@ -107,10 +107,13 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
         num_envs: int = 1,
         scenario: str | ScenarioConfig = "medium",
         render_mode: str | None = None,
+        max_episode_steps: int | None = None,
         **overrides: Any,
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; use gymnasium.make for one env")
+        if max_episode_steps is not None:  # gymnasium.make_vec passes the id's horizon
+            overrides["time"] = {**overrides.get("time", {}), "max_steps": max_episode_steps}
         self.vector = VectorEnv(scenario, num_envs=num_envs, **overrides)
         self.num_envs = num_envs
         self.single_observation_space = self.vector.single_observation_space["observation"]
