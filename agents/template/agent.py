@@ -12,7 +12,8 @@ The protocol (see ``cdr_bench/evaluate/protocol.py``):
 * ``act(observation) -> int``: ``observation`` is the dict ``{"observation": (F,) float32,
   "action_mask": (27,) int8}``; return an action index 0..26 where index
   ``9 * (a_psi + 1) + 3 * (a_v + 1) + (a_h + 1)`` encodes heading -/0/+5 deg (+ = right),
-  speed -/0/+50 kt and level -/0/+1 (``cdr_bench.actions.encode`` does it for you);
+  speed -/0/+50 kt and level -/0/+1 (``cdr_bench.actions.encode((a_psi, a_v, a_h))`` takes
+  one tuple of three values in {-1, 0, 1}; ``decode(index)`` gives the tuple back);
 * optional ``act_batch(observations (N, F), masks (N, 27)) -> N ints``: decide for many aircraft
   at once (the evaluator runs episodes in lock-step batches: much faster than ``act``);
 * optional ``reset(seed)``: called before every batch of episodes; re-seed any randomness here.
@@ -21,13 +22,18 @@ The same agent drives the ownship and every learning intruder. A masked action (
 is counted as invalid and its level change is not executed; anything that is not an integer in
 0..26 stops the evaluation with an error.
 
-A learned agent loads its checkpoint relative to this file, e.g.::
+A learned agent loads its weights relative to this file, without unpickling (the leaderboard
+refuses pickles and TorchScript archives), e.g. a state dict::
 
     import torch
-    CHECKPOINT = Path(__file__).parent / "policy.pt"
-    self.policy = torch.jit.load(CHECKPOINT, map_location="cpu").eval()
+    CHECKPOINT = Path(__file__).parent / "policy.pt"      # torch.save(model.state_dict(), ...)
+    self.policy = MyNetwork()                               # defined in this file
+    self.policy.load_state_dict(torch.load(CHECKPOINT, map_location="cpu", weights_only=True))
+    self.policy.eval()
 
-and every file in this folder is hashed into the result, so a result names its checkpoint.
+(or safetensors, or ``numpy.load`` of an ``.npz``), and every file in this folder is hashed
+into the result, so a result names its checkpoint. The agent runs in its own process; it sees
+only observations and masks.
 """
 
 from __future__ import annotations
