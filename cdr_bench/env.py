@@ -22,6 +22,39 @@ _STATE_AC = 8  # x, y, vx, vy, level, active, goal_x, goal_y
 _STATE_BG = 6  # x, y, vx, vy, level, active
 
 
+FLAT_INFO_KEYS = (
+    *(f"reward_{t}" for t in REWARD_TERMS),
+    "goal_reward",
+    "safety_reward",
+    "los_count",
+    "nmac_count",
+    "invalid_action",
+    "outside",
+    "min_separation_km",
+    "step",
+    "outcome",
+    "episode_seed",
+)
+"""The keys of ``infos[agent]`` with ``flat_infos=True``: the same every step (reset included),
+every value a number (``outcome``: 0 while flying, else the code of ``cdr_bench.sim``'s
+``OUTCOME_NAMES``; ``los_count`` / ``nmac_count``: how many aircraft, instead of their ids)."""
+
+
+def _flat(info: dict[str, Any], terms: list[float], outcome: int, seed: int) -> dict[str, Any]:
+    flat: dict[str, Any] = {f"reward_{t}": v for t, v in zip(REWARD_TERMS, terms, strict=True)}
+    flat["goal_reward"] = info["goal_reward"]
+    flat["safety_reward"] = info["safety_reward"]
+    flat["los_count"] = len(info["los_with"])
+    flat["nmac_count"] = len(info["nmac_with"])
+    flat["invalid_action"] = float(info["invalid_action"])
+    flat["outside"] = float(info["outside"])
+    flat["min_separation_km"] = info["min_separation_km"]
+    flat["step"] = info["step"]
+    flat["outcome"] = outcome
+    flat["episode_seed"] = seed
+    return flat
+
+
 class CDREnv(ParallelEnv):
     """cdr-bench: conflict detection and resolution in a 3-level en-route sector.
 
@@ -143,12 +176,16 @@ class CDREnv(ParallelEnv):
 
     ## Arguments
 
-    ``parallel_env(scenario="medium", render_mode=None, **overrides)``: ``scenario`` is a registry
-    name (``cdr-bench scenarios list``), a YAML path or a ``ScenarioConfig``; ``overrides`` are
-    nested scenario fields, validated like YAML (``separation={"los_km": 8.0}``).
+    ``parallel_env(scenario="medium", render_mode=None, flat_infos=False, **overrides)``:
+    ``scenario`` is a registry name (``cdr-bench scenarios list``), a YAML path or a
+    ``ScenarioConfig``; ``overrides`` are nested scenario fields, validated like YAML
+    (``separation={"los_km": 8.0}``).
     ``reset(seed=None, options=None)``: a seed fixes the episode (traffic, start, goal) and seeds
     every agent's action space; later unseeded resets continue the seeded stream.
-    ``options={"episode_seed": s}`` sets the simulator seed directly. ``render_mode``:
+    ``options={"episode_seed": s}`` sets the simulator seed directly.
+    ``flat_infos=True`` makes ``infos[agent]`` the same numeric keys every step
+    (``FLAT_INFO_KEYS``: each reward term, the counts of aircraft in LoS / NMAC, ``outcome`` as a
+    code), the form collectors such as TorchRL's ``PettingZooWrapper`` need. ``render_mode``:
     ``"rgb_array"`` (512 x 512 x 3 uint8 top-down picture with legend, scale bar, time and
     outcome) or ``"human"`` (matplotlib window). The picture zooms to the encounter in scenarios
     that place aircraft around the ownship (the tactical ones) and shows the whole sector
@@ -185,8 +222,12 @@ class CDREnv(ParallelEnv):
         self,
         scenario: str | ScenarioConfig = "medium",
         render_mode: str | None = None,
+        flat_infos: bool = False,
         **overrides: Any,
     ):
+        if not isinstance(flat_infos, bool):
+            raise ArgumentError(f"flat_infos must be True or False, got {short_repr(flat_infos)}")
+        self.flat_infos = flat_infos
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ArgumentError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, "
@@ -261,7 +302,12 @@ class CDREnv(ParallelEnv):
         self._last_result = None
         self._trail = [tuple(self.vector.sim.ac_pos_km[0, 0].tolist())]
         out = self._observations(self.agents, obs, masks)
-        infos = {a: {"episode_seed": self.episode_seed} for a in self.agents}
+        if self.flat_infos:
+            first = {k: 0.0 for k in FLAT_INFO_KEYS} | {"episode_seed": self.episode_seed}
+            first["min_separation_km"] = float("inf")
+            infos = {a: dict(first) for a in self.agents}
+        else:
+            infos = {a: {"episode_seed": self.episode_seed} for a in self.agents}
         if self.render_mode == "human":
             self.render()
         return out, infos
@@ -327,6 +373,8 @@ class CDREnv(ParallelEnv):
             if term or trunc:
                 info["outcome"] = OUTCOME_NAMES[int(res.outcome[0, m])]
                 finished = True
+            if self.flat_infos:
+                info = _flat(info, row, int(res.outcome[0, m]), self.episode_seed)
             infos[agent] = info
         if finished:
             self.agents = [a for a in acting if not (terms[a] or truncs[a])]
