@@ -100,6 +100,7 @@ def test_template_agent_and_default_output_path(tmp_path):
     assert set(res["agent"]["files"]) == {"agent.py", "policy.bin"}
 
 
+@pytest.mark.slow
 def test_workers_and_resume_give_identical_results(tmp_path):
     slow = write_agent(
         tmp_path,

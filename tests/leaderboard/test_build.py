@@ -67,6 +67,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert not re.search(r'(src|href)="(https?:)?//', html), "external asset in index.html"
 
 
+@pytest.mark.slow
 def test_check_passes_untampered_and_fails_tampered(repo: Path) -> None:
     r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
     assert r.returncode == 0, r.stderr

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from .helpers import ROOT, cdr_bench, summary
 
@@ -38,6 +39,7 @@ def test_sweeps_read_every_trainers_flags():
         assert {"--run-dir", "--seed", "--total-steps", "--resume", "--failure-penalty"} <= known
 
 
+@pytest.mark.slow
 def test_trained_checkpoint_with_agent_latency_and_multimodal(tmp_path):
     d = tmp_path / "run"
     tiny = [

@@ -31,6 +31,7 @@ def local_ray():
     ray.shutdown()
 
 
+@pytest.mark.slow
 def test_sweep_runs_and_resumes(local_ray, tmp_path):
     sweep = load_sweep(tiny_sweep(tmp_path, [1, 2]))
     out = tmp_path / "out"
@@ -63,6 +64,7 @@ def test_sweep_runs_and_resumes(local_ray, tmp_path):
     assert len(data["factors"]["default"]["default"]["success"]) == 3  # one per seed
 
 
+@pytest.mark.slow
 def test_failed_trial_is_reported_and_others_kept(local_ray, tmp_path):
     # width 12 is not divisible by the 8 attention heads: the trainer fails at start-up
     sweep = load_sweep(tiny_sweep(tmp_path, [1], grid={"width": [16, 12]}))
