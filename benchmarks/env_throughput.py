@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).parent))
+from _checkout import checkout as _checkout  # noqa: E402
 
 
 def _worker(args: argparse.Namespace) -> None:
@@ -102,17 +104,6 @@ def _batched_before_vector_env(scenario: str, steps: int, n: int, rng: Any) -> f
         if done.size:
             sim.reset(rng.integers(0, 2**62, done.size), episodes=done)
     return steps * n / (time.perf_counter() - t0)
-
-
-def _checkout(ref: str) -> str:
-    path = ROOT / ".bench" / ref
-    if not path.exists():
-        subprocess.run(
-            ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(path), ref],
-            check=True,
-            capture_output=True,
-        )
-    return str(path)
 
 
 def _measure(args: argparse.Namespace, code: str | None) -> dict[str, Any]:

@@ -30,6 +30,8 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).parent))
+from _checkout import checkout as _checkout  # noqa: E402
 
 # Runs the CLI of the checkout at argv[1] (bypassing the editable install of the current one).
 _LAUNCH = (
@@ -40,17 +42,6 @@ _LAUNCH = (
     "from cdr_bench.cli import main\n"
     "raise SystemExit(main(sys.argv[1:]))\n"
 )
-
-
-def _checkout(ref: str) -> str:
-    path = ROOT / ".bench" / ref
-    if not path.exists():
-        subprocess.run(
-            ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(path), ref],
-            check=True,
-            capture_output=True,
-        )
-    return str(path)
 
 
 def _run(agent: str, code: str, args: argparse.Namespace, tmp: str) -> dict[str, float]:

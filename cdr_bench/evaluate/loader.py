@@ -92,7 +92,8 @@ def agent_files(path: str | os.PathLike[str]) -> list[Path]:
     return sorted(out)
 
 
-def _sha256(p: Path) -> str:
+def file_sha256(p: Path) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
     h = hashlib.sha256()
     with open(p, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -106,7 +107,7 @@ def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
     identifies exactly what was scored."""
     f = resolve_agent_path(path)
     base = f.parent
-    files = {p.relative_to(base).as_posix(): _sha256(p) for p in agent_files(path)}
+    files = {p.relative_to(base).as_posix(): file_sha256(p) for p in agent_files(path)}
     lines = [f"{k} {v}" for k, v in sorted(files.items())]
     identity: dict[str, Any] = {
         "name": agent_name(path),
@@ -119,7 +120,7 @@ def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
         ck = Path(override)
         if not ck.is_file():
             raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")
-        digest = _sha256(ck)
+        digest = file_sha256(ck)
         identity["checkpoint_override"] = {"path": override, "sha256": digest}
         lines.append(f"{CHECKPOINT_ENV} {digest}")
     identity["sha256"] = hashlib.sha256("\n".join(lines).encode()).hexdigest()

@@ -40,6 +40,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.evaluate.loader import file_sha256
+
 SCHEMA_VERSION = 2
 RESULT_KIND = "cdr-bench evaluation"
 
@@ -186,14 +188,6 @@ def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, An
     atomic_write_text(out, json.dumps(result, indent=1) + "\n")
 
 
-def _file_sha256(p: Path) -> str:
-    h = hashlib.sha256()
-    with open(p, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
     """A result JSON, checked for kind and schema version, and against its per-episode JSONL
     (present, same SHA-256); ``ValueError`` naming the file otherwise."""
@@ -221,7 +215,7 @@ def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
     ep = p.parent / name
     if not ep.is_file():
         raise ValueError(f"{p}: its per-episode file {ep} is missing")
-    if _file_sha256(ep) != data.get("episodes_sha256"):
+    if file_sha256(ep) != data.get("episodes_sha256"):
         raise ValueError(
             f"{p}: its per-episode file {ep.name} does not match it (episodes_sha256 differs: "
             "an interrupted write or an edit); re-run the evaluation"
