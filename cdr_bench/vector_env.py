@@ -36,6 +36,7 @@ from cdr_bench.errors import ArgumentError, short_repr
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import Simulator, StepResult, observation_bounds
 from cdr_bench.sim.core import TIMEOUT
+from cdr_bench.sim.kernels import conflicts_episodes
 
 SEED_BOUND = 2**63
 """Episode seeds drawn from a stream are integers in 0..2**63-1."""
@@ -229,3 +230,13 @@ class VectorEnv:
     def observe(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
         """(E, M, F) observations and (E, M, 27) masks of the current state."""
         return self.sim.observe()
+
+    def conflicts(self, out: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
+        """(E, M, N) predicted conflicts of the current state (docs/model.md §10.1): aircraft
+        ``n`` at the same level as controlled aircraft ``m`` (both in the sky) with a closest
+        approach below the LoS threshold within the look-ahead. Written into ``out`` if given."""
+        sim = self.sim
+        if out is None:
+            out = np.zeros((sim.E, sim.M, sim.N), dtype=bool)
+        conflicts_episodes(out, sim.state, sim.constants)
+        return out

@@ -17,7 +17,13 @@ from cdr_bench.evaluate import results as rf
 from cdr_bench.evaluate.loader import AgentError, agent_identity
 from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
 from cdr_bench.evaluate.remote import AgentOptions, check_timeout
-from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE, close_all, load_for, run_batch_task
+from cdr_bench.evaluate.runner import (
+    DEFAULT_BATCH_SIZE,
+    close_all,
+    load_for,
+    run_batch,
+    run_batch_task,
+)
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig, list_scenarios, load_scenario
 
@@ -268,6 +274,36 @@ def evaluate(
     rf.write_results(out, result, all_episodes)
     log.remove()
     return result
+
+
+def record_traces(
+    agent_path: str | os.PathLike[str],
+    scenario: str | ScenarioConfig,
+    episodes: int,
+    *,
+    base_seed: int = 0,
+    agent_options: AgentOptions | None = None,
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    n_episodes: int = PAPER_EPISODES,
+) -> list[dict[str, Any]]:
+    """Trajectories of episodes ``0 .. episodes - 1`` of ``scenario`` flown by the agent
+    (:func:`cdr_bench.evaluate.runner.run_batch` with ``trace``), for replays.
+
+    The whole first batch of an evaluation with ``batch_size`` and ``n_episodes`` is run, so
+    the traced episodes are exactly those of such an evaluation (the same seeds, and the same
+    agent reset seed and batch, so a stochastic agent draws the same actions too); their
+    ``outcomes`` equal the evaluation's records.
+    """
+    config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario(scenario)
+    size = min(batch_size, n_episodes)
+    if not 1 <= episodes <= size:
+        raise UserError(f"episodes to trace: expected 1..{size}, got {episodes}")
+    agent = load_for(str(Path(agent_path).resolve()), config, agent_options)
+    try:
+        batch = run_batch(agent, config, base_seed, 0, batch_size, n_episodes, trace=episodes)
+    finally:
+        close_all()
+    return list(batch["traces"])
 
 
 def _batch_check(

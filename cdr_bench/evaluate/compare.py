@@ -34,6 +34,20 @@ _METRICS: dict[str, tuple[Any, Any]] = {
     "goal_reward": (lambda r: r["goal_reward"], lambda r: 1),
     "safety_reward": (lambda r: r["safety_reward"], lambda r: 1),
     "invalid_action_rate": (lambda r: r["invalid_actions"], lambda r: r["steps"]),
+    "los_events": (lambda r: r["los_events"], lambda r: 1),
+    "los_time_s": (lambda r: r["los_s"], lambda r: 1),
+    "intrusion_severity": (lambda r: r["severity"] if r["los"] else 0, lambda r: r["los"]),
+    "conflicts": (lambda r: r["conflicts"], lambda r: 1),
+    "extra_path_km": (
+        lambda r: r["path_km"] - r["direct_km"] if r["outcome"] == "success" else 0,
+        lambda r: r["outcome"] == "success",
+    ),
+    "delay_s": (
+        lambda r: r["flight_s"] - r["direct_s"] if r["outcome"] == "success" else 0,
+        lambda r: r["outcome"] == "success",
+    ),
+    "manoeuvres": (lambda r: r["manoeuvres"], lambda r: 1),
+    "nmac_per_flight_hour": (lambda r: r["nmac_events"], lambda r: r["flight_s"] / 3600.0),
 }
 
 

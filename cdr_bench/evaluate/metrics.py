@@ -15,6 +15,17 @@ is also a LoS), ``nmac``, ``goal_reward`` / ``safety_reward`` (episode sums of R
 * ``goal_reward`` / ``safety_reward``: mean episode sums.
 * ``invalid_action_rate``: masked actions / decisions.
 
+Field metrics (records of schema 3 also carry ``los_events``, ``los_s``, ``nmac_events``,
+``conflicts``, ``manoeuvres``, ``flight_s``, ``path_km``, ``direct_km``, ``direct_s`` and
+``severity``; docs/model.md §10.1 defines each):
+
+* per flight: ``los_events``, ``los_time_s``, ``conflicts``, ``manoeuvres`` (means);
+* ``intrusion_severity``: mean of ``severity`` = 1 - min separation / LoS threshold over the
+  flights with a LoS;
+* ``extra_path_km`` and ``delay_s``: means over successful flights of ``path_km - direct_km``
+  and ``flight_s - direct_s``;
+* ``nmac_per_flight_hour``: NMAC events / flight hours, with the Poisson score interval.
+
 Intervals: Wilson score (z = 1.96) for rates, percentile bootstrap (2000 resamples, fixed seed,
 so deterministic) for means. For learning intruders every aircraft-episode counts as one trial.
 """
@@ -87,6 +98,35 @@ def mean(values: Sequence[float]) -> dict[str, Any]:
     return {"value": _r(float(x.mean())) if x.size else None, "ci95": [_r(lo), _r(hi)], "n": x.size}
 
 
+def poisson_rate(k: int, exposure: float, z: float = Z95) -> dict[str, Any]:
+    """Events per unit of exposure with the score interval of a Poisson rate:
+    (k + z²/2 ± z √(k + z²/4)) / exposure (lower bound 0 when k = 0)."""
+    if exposure <= 0:
+        return {"value": None, "ci95": [None, None], "count": k, "exposure_h": _r(exposure)}
+    centre = k + z * z / 2
+    half = z * math.sqrt(k + z * z / 4)
+    lo = 0.0 if k == 0 else (centre - half) / exposure
+    return {
+        "value": _r(k / exposure),
+        "ci95": [_r(lo), _r((centre + half) / exposure)],
+        "count": k,
+        "exposure_h": _r(exposure),
+    }
+
+
+FIELD_METRICS = (
+    "los_events",
+    "los_time_s",
+    "intrusion_severity",
+    "conflicts",
+    "extra_path_km",
+    "delay_s",
+    "manoeuvres",
+    "nmac_per_flight_hour",
+)
+"""Keys of the field-standard metrics, in display order (docs/model.md §10.1)."""
+
+
 def group_metrics(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Every metric over a list of per-aircraft episode records (see the module docstring)."""
     n = len(records)
@@ -109,6 +149,17 @@ def group_metrics(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     out["safety_reward"] = mean([r["safety_reward"] for r in records])
     decisions = sum(int(r["steps"]) for r in records)
     out["invalid_action_rate"] = rate(sum(int(r["invalid_actions"]) for r in records), decisions)
+
+    out["los_events"] = mean([r["los_events"] for r in records])
+    out["los_time_s"] = mean([r["los_s"] for r in records])
+    out["intrusion_severity"] = mean([r["severity"] for r in records if r["los"]])
+    out["conflicts"] = mean([r["conflicts"] for r in records])
+    ok = [r for r, o in zip(records, outcome, strict=True) if o == "success"]
+    out["extra_path_km"] = mean([r["path_km"] - r["direct_km"] for r in ok])
+    out["delay_s"] = mean([r["flight_s"] - r["direct_s"] for r in ok])
+    out["manoeuvres"] = mean([r["manoeuvres"] for r in records])
+    hours = sum(float(r["flight_s"]) for r in records) / 3600.0
+    out["nmac_per_flight_hour"] = poisson_rate(sum(int(r["nmac_events"]) for r in records), hours)
     return out
 
 

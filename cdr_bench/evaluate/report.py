@@ -50,9 +50,18 @@ COLUMNS: tuple[Column, ...] = (
     Column("R_G", "goal_reward", "mean", True),
     Column("R_S", "safety_reward", "mean", True),
     Column("invalid", "invalid_action_rate", "rate", False),
+    Column("LoS events", "los_events", "mean", False, detail=True),
+    Column("LoS time s", "los_time_s", "mean", False, detail=True),
+    Column("severity", "intrusion_severity", "mean", False, detail=True),
+    Column("conflicts", "conflicts", "mean", False, detail=True),
+    Column("extra path km", "extra_path_km", "mean", False, detail=True),
+    Column("delay s", "delay_s", "mean", False, detail=True),
+    Column("manoeuvres", "manoeuvres", "mean", False, detail=True),
+    Column("NMAC / flight h", "nmac_per_flight_hour", "per_h", False, detail=True),
 )
 """The one column list: the paper's five metrics, clean success, the goal and safety rewards,
-the share of masked (invalid) actions, and two outcome details."""
+the share of masked (invalid) actions, two outcome details and the field metrics
+(docs/model.md §10.1; per flight unless stated)."""
 
 MAIN_COLUMNS: tuple[Column, ...] = tuple(c for c in COLUMNS if not c.detail)
 """The columns of the leaderboard and of the documentation tables."""
@@ -68,6 +77,8 @@ LATENCY_HEADER = "latency ms med / p99"
 def fmt_value(kind: str, v: float | None) -> str:
     if v is None:
         return "-"
+    if kind == "per_h":
+        return f"{v:.3g}"
     return f"{100 * v:.1f}%" if kind == "rate" else f"{v:.2f}"
 
 
@@ -81,6 +92,8 @@ def fmt_metric(kind: str, m: dict[str, Any], ci: bool = True) -> str:
         return fmt_value(kind, v)
     if kind == "rate":
         return f"{100 * v:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
+    if kind == "per_h":
+        return f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
     return f"{v:.2f} [{lo:.2f}, {hi:.2f}]"
 
 
@@ -322,7 +335,9 @@ REPORT_NOTE = (
     "counts episodes with at least one loss of separation whatever the outcome (an NMAC is also "
     "a LoS); success, NMAC, timeout, ended by LoS (only where a LoS ends the episode) and "
     "boundary (only where leaving the sector ends it) partition the episodes. Invalid is the "
-    "share of decisions that chose a masked action. Latency is per decision (one batched call / "
+    "share of decisions that chose a masked action. Field metrics are per flight (extra path "
+    "and delay over successful flights, severity over flights with a LoS; docs/model.md §10.1). "
+    "Latency is per decision (one batched call / "
     "decisions in it), in ms, machine-dependent."
 )
 

@@ -1,7 +1,7 @@
 """Result files: a JSON summary per run and a per-episode JSONL beside it, both written
 atomically (temporary file + ``os.replace``), and the partial checkpoint used by ``--resume``.
 
-Layout of ``<out>.json`` (``schema_version`` 2)::
+Layout of ``<out>.json`` (``schema_version`` 3)::
 
     schema_version, kind, agent {name, path, entry, files {name: sha256}, sha256},
     suite, base_seed, batch_size, seed_derivation, versions {cdr_bench, python, numpy, ...},
@@ -42,7 +42,7 @@ from typing import Any
 
 from cdr_bench.evaluate.loader import file_sha256
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 RESULT_KIND = "cdr-bench evaluation"
 
 

@@ -39,6 +39,7 @@ from cdr_bench.evaluate.remote import (
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig
 from cdr_bench.sim import OUTCOME_NAMES, observation_bounds
+from cdr_bench.sim.units import KM_PER_S_PER_KT
 from cdr_bench.vector_env import VectorEnv, observation_space
 
 __all__ = ["DEFAULT_DECISION_TIMEOUT_S", "run_batch", "run_batch_task", "load_for"]
@@ -70,9 +71,11 @@ def run_batch(
     batch_index: int,
     batch_size: int,
     n_episodes: int,
+    trace: int = 0,
 ) -> dict[str, Any]:
     """Run batch ``batch_index`` of a scenario (episodes on the fixed grid, at most
-    ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``."""
+    ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``,
+    plus ``"traces"`` (:func:`_frame`) of the batch's first ``trace`` episodes if ``trace``."""
     chash = config.config_hash()
     start = batch_index * batch_size
     stop = min(start + batch_size, n_episodes)
@@ -88,6 +91,10 @@ def run_batch(
     ids = env.agent_ids
     M = env.n_agents
 
+    sim = env.sim
+    N = sim.N
+    dt_s = config.time.dt_s
+    los_km = config.separation.los_km
     steps = np.zeros((E, M), dtype=np.int64)
     los = np.zeros((E, M), dtype=bool)
     nmac = np.zeros((E, M), dtype=bool)
@@ -96,6 +103,28 @@ def run_batch(
     invalid = np.zeros((E, M), dtype=np.int64)
     min_sep = np.full((E, M), np.inf)
     outcome = np.zeros((E, M), dtype=np.int8)
+    # Field metrics (docs/model.md §10.1): events are pairs entering a state.
+    los_events = np.zeros((E, M), dtype=np.int64)
+    nmac_events = np.zeros((E, M), dtype=np.int64)
+    los_steps = np.zeros((E, M), dtype=np.int64)
+    conflict_events = np.zeros((E, M), dtype=np.int64)
+    manoeuvres = np.zeros((E, M), dtype=np.int64)
+    path_km = np.zeros((E, M))
+    prev_los = np.zeros((E, M, N), dtype=bool)
+    prev_nmac = np.zeros((E, M, N), dtype=bool)
+    in_conflict = env.conflicts()
+    conflict_events += in_conflict.sum(axis=2)
+    conflict_now = np.zeros_like(in_conflict)
+    start_km = sim.ac_pos_km.copy()
+    goal_km = sim.ac_goal_km.copy()
+    gap = goal_km - start_km
+    goal_radius = config.ownship.goal_radius_km
+    direct_km = np.maximum(_norm(gap) - goal_radius, 0.0)
+    flight_s = np.zeros((E, M))
+    start_speed_km_s = sim.ac_speed_kt * KM_PER_S_PER_KT
+    traces = [_trace_head(config, sim, start + e, seeds[e], ids, e) for e in range(min(trace, E))]
+    for t in traces:
+        t["frames"].append(_frame(sim, t.pop("_row"), None))
     per_decision_ms: list[float] = []
     per_call_ms: list[float] = []
     full = np.full((E, M), HOLD, dtype=np.int64)
@@ -132,12 +161,24 @@ def run_batch(
 
         full[:] = HOLD
         full[rows_e, rows_m] = actions
+        manoeuvres += full != HOLD
+        before_km = sim.ac_pos_km.copy()
         step = env.step(full)
         res = step.result
         obs_all, masks_all = step.obs, step.action_mask
         steps += res.acting
-        los |= res.los_with.any(axis=2)
-        nmac |= res.nmac_with.any(axis=2)
+        moved = sim.ac_pos_km - before_km
+        part = np.where(res.reached_goal, _goal_entry(before_km, moved, goal_km, goal_radius), 1.0)
+        path_km += np.where(res.acting, part * _norm(moved), 0.0)
+        flight_s += np.where(res.acting, part * dt_s, 0.0)
+        los_with, nmac_with = res.los_with, res.nmac_with
+        los_events += (los_with & ~prev_los).sum(axis=2)
+        nmac_events += (nmac_with & ~prev_nmac).sum(axis=2)
+        prev_los, prev_nmac = los_with, nmac_with
+        los_any = los_with.any(axis=2)
+        los_steps += los_any
+        los |= los_any
+        nmac |= nmac_with.any(axis=2)
         goal_r += res.goal_reward
         safety_r += res.safety_reward
         invalid += res.invalid_action
@@ -145,6 +186,12 @@ def run_batch(
         done = res.outcome != 0
         outcome[done] = res.outcome[done]
         flying = env.flying
+        env.conflicts(conflict_now)
+        conflict_events += (conflict_now & ~in_conflict).sum(axis=2)
+        in_conflict, conflict_now = conflict_now, in_conflict
+        for i, t in enumerate(traces):
+            if res.acting[i].any():
+                t["frames"].append(_frame(sim, i, los_any[i]))
 
     episodes = []
     for e in range(E):
@@ -162,6 +209,20 @@ def run_batch(
                     "safety_reward": round(float(safety_r[e, m]), 6),
                     "invalid_actions": int(invalid[e, m]),
                     "min_sep_km": round(sep, 4) if math.isfinite(sep) else None,
+                    "severity": round(max(0.0, 1.0 - sep / los_km), 6)
+                    if math.isfinite(sep)
+                    else None,
+                    "los_events": int(los_events[e, m]),
+                    "los_s": round(float(los_steps[e, m]) * dt_s, 6),
+                    "nmac_events": int(nmac_events[e, m]),
+                    "conflicts": int(conflict_events[e, m]),
+                    "manoeuvres": int(manoeuvres[e, m]),
+                    "flight_s": round(float(flight_s[e, m]), 4),
+                    "path_km": round(float(path_km[e, m]), 4),
+                    "direct_km": round(float(direct_km[e, m]), 4),
+                    "direct_s": round(float(direct_km[e, m] / start_speed_km_s[e, m]), 4)
+                    if start_speed_km_s[e, m] > 0
+                    else None,
                 }
             )
         episodes.append(
@@ -172,7 +233,9 @@ def run_batch(
                 "aircraft": aircraft,
             }
         )
-    return {
+    for i, t in enumerate(traces):
+        t["outcomes"] = [OUTCOME_NAMES[int(o)] for o in outcome[i]]
+    out: dict[str, Any] = {
         "scenario": config.id,
         "batch": batch_index,
         "episodes": episodes,
@@ -180,6 +243,69 @@ def run_batch(
             "per_decision_ms": [round(x, 5) for x in per_decision_ms],
             "per_call_ms": [round(x, 5) for x in per_call_ms],
         },
+    }
+    if trace:
+        out["traces"] = traces
+    return out
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Length of (..., 2) vectors."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
+
+
+def _goal_entry(
+    before_km: np.ndarray, moved_km: np.ndarray, goal_km: np.ndarray, radius_km: float
+) -> np.ndarray:
+    """Fraction in [0, 1] of a straight step from ``before_km`` by ``moved_km`` flown when it
+    first comes within ``radius_km`` of ``goal_km`` (1 if it never does), elementwise."""
+    px, py = before_km[..., 0] - goal_km[..., 0], before_km[..., 1] - goal_km[..., 1]
+    dx, dy = moved_km[..., 0], moved_km[..., 1]
+    a = dx * dx + dy * dy
+    b = px * dx + py * dy
+    c = px * px + py * py - radius_km * radius_km
+    disc = b * b - a * c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / a
+    t = np.where((a > 0) & (disc >= 0), t, 1.0)
+    return np.where(c <= 0, 0.0, np.clip(t, 0.0, 1.0))
+
+
+def _trace_head(
+    config: ScenarioConfig, sim: Any, episode: int, seed: int, ids: list[str], row: int
+) -> dict[str, Any]:
+    """The fixed part of an episode's trace (``frames`` filled by :func:`_frame`)."""
+    return {
+        "episode": episode,
+        "seed": seed,
+        "scenario": config.id,
+        "dt_s": config.time.dt_s,
+        "size_km": config.sector.size_km,
+        "los_km": config.separation.los_km,
+        "ids": list(ids),
+        "goals_km": [[round(float(v), 2) for v in g] for g in sim.ac_goal_km[row]],
+        "frames": [],
+        "_row": row,
+    }
+
+
+def _frame(sim: Any, e: int, los_any: Any) -> dict[str, Any]:
+    """One frame of episode ``e``'s trace: controlled aircraft ``c`` as ``[x_km, y_km, level,
+    flying]``, background aircraft in the sky ``b`` as ``[x_km, y_km, level]`` and ``los``, per
+    controlled aircraft, 1 if it was in LoS during the step that led here (0 at the start)."""
+    B = sim.B
+    pos, level, active = sim.pos_km[e], sim.level[e], sim.active[e]
+    return {
+        "c": [
+            [round(float(pos[n, 0]), 2), round(float(pos[n, 1]), 2), int(level[n]), int(active[n])]
+            for n in range(B, sim.N)
+        ],
+        "b": [
+            [round(float(pos[n, 0]), 2), round(float(pos[n, 1]), 2), int(level[n])]
+            for n in range(B)
+            if active[n]
+        ],
+        "los": [0] * (sim.N - B) if los_any is None else [int(x) for x in los_any],
     }
 
 

@@ -784,3 +784,37 @@ def _observe_episode(e, obs, masks, s, c, row, best_d, best_n):
         for a in range(27):
             a_h = a % 3 - 1
             masks[e, m, a] = 0 <= lv + a_h < N_LEVELS
+
+
+# ----------------------------------------------------------------------------------------------
+# Conflicts (a metric of the evaluator, docs/model.md §10.1; not used by the dynamics)
+
+
+@njit(cache=True)
+def conflicts_episodes(out, s, c):
+    """Predicted conflicts of every flying controlled aircraft: ``out[e, m, n]`` is set when
+    aircraft ``n`` is in the sky at the same level as controlled aircraft ``m`` and their
+    closest approach over the look-ahead ``[0, observation.lookahead_s]``, at the current
+    velocities, is below the LoS threshold (the observation's ``conflict`` flag, §7, for every
+    other aircraft rather than the nearest K). Other entries are cleared."""
+    E, M, N = out.shape
+    B = N - M
+    look = c.fp[P_LOOKAHEAD]
+    los_km = c.fp[P_LOS]
+    for e in range(E):
+        for m in range(M):
+            i = B + m
+            for n in range(N):
+                out[e, m, n] = False
+            if not s.active[e, i]:
+                continue
+            x, y = s.pos[e, i, 0], s.pos[e, i, 1]
+            vx0, vy0 = s.vel[e, i, 0], s.vel[e, i, 1]
+            lv = s.level[e, i]
+            for n in range(N):
+                if n == i or not s.active[e, n] or s.level[e, n] != lv:
+                    continue
+                px, py = s.pos[e, n, 0] - x, s.pos[e, n, 1] - y
+                qx, qy = s.vel[e, n, 0] - vx0, s.vel[e, n, 1] - vy0
+                d_cpa, _ = closest_approach(px, py, qx, qy, look)
+                out[e, m, n] = d_cpa < los_km

@@ -78,7 +78,7 @@ def test_evaluate_writes_summary_and_result_files(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "ownship" in r.stdout and "intruders" in r.stdout and "success" in r.stdout
     res = json.loads(out.read_text())
-    assert res["schema_version"] == 2 and res["agent"]["name"] == "direct"
+    assert res["schema_version"] == 3 and res["agent"]["name"] == "direct"
     assert "agent.py" in res["agent"]["files"]
     sc = res["scenarios"][0]
     assert sc["id"] == "marl/low-2" and sc["config"]["id"] == "marl/low-2"

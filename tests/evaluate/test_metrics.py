@@ -26,6 +26,16 @@ def rec(outcome, steps=10, los=False, goal=0.0, safety=0.0, invalid=0, id="ownsh
         "safety_reward": safety,
         "invalid_actions": invalid,
         "min_sep_km": None,
+        "severity": None,
+        "los_events": int(los),
+        "los_s": 30.0 * los,
+        "nmac_events": int(outcome == "nmac"),
+        "conflicts": 0,
+        "manoeuvres": 0,
+        "flight_s": 30.0 * steps,
+        "path_km": 6.6 * steps,
+        "direct_km": 6.6 * steps,
+        "direct_s": 30.0 * steps,
     }
 
 
