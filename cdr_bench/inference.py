@@ -436,6 +436,52 @@ def _argmax(v, mask, use_mask):  # pragma: no cover - compiled
     return out
 
 
+@njit(**_JIT)
+def _sample(v, mask, use_mask, u):  # pragma: no cover - compiled
+    """Per row, the first index whose cumulative softmax weight exceeds ``u[n]`` times the
+    total: a draw from the (masked) softmax of the row by its inverse CDF, weights
+    e^(v - max) from :func:`_vexp`, summed in index order in float64. NaN logits and
+    all-masked rows give :func:`_argmax`'s choice."""
+    N, A = v.shape
+    out = np.zeros(N, np.int64)
+    z = np.empty(A)
+    w = np.empty(A)
+    tmp = np.empty(A)
+    for n in range(N):
+        best = -math.inf
+        bad = False
+        for a in range(A):
+            if use_mask and not mask[n, a]:
+                continue
+            x = v[n, a]
+            if x != x:
+                bad = True
+            elif x > best:
+                best = x
+        if bad or best == -math.inf:
+            out[n] = _argmax(v[n : n + 1], mask[n : n + 1] if use_mask else mask, use_mask)[0]
+            continue
+        for a in range(A):
+            z[a] = np.float64(v[n, a]) - best
+        _vexp(z, w, tmp, A)
+        total = 0.0
+        for a in range(A):
+            if use_mask and not mask[n, a]:
+                w[a] = 0.0
+            total += w[a]
+        target = u[n] * total
+        acc = 0.0
+        last = 0
+        for a in range(A):
+            if w[a] > 0.0:
+                last = a
+                acc += w[a]
+                if acc > target:
+                    break
+        out[n] = last
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # Helpers (Python)
 
@@ -478,6 +524,17 @@ def masked_argmax(values: Array, mask: Any | None) -> NDArray[np.int64]:
     if mask is None:
         return _argmax(v, np.ones((1, 1), np.bool_), False)
     return _argmax(v, _mask_bool(mask, v.shape[0]), True)
+
+
+def masked_sample(logits: Array, mask: Any | None, rng: np.random.Generator) -> NDArray[np.int64]:
+    """(N, A) logits -> (N,) actions drawn from the softmax over the feasible entries (or all
+    entries if ``mask`` is None), one ``rng.random()`` per row (PCG64: the same draws on every
+    CPU) and the weights on the fixed path, so the same seed gives the same actions anywhere."""
+    v = _f32(logits)
+    u = rng.random(v.shape[0])
+    if mask is None:
+        return _sample(v, np.ones((1, 1), np.bool_), False, u)
+    return _sample(v, _mask_bool(mask, v.shape[0]), True, u)
 
 
 def _obs(observations: Any) -> Array:
