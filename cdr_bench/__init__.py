@@ -23,9 +23,16 @@ GYMNASIUM_TASKS: list[tuple[str, dict[str, Any], int | None]] = [
     ("cdr_bench/Low-v0", {"scenario": "low"}, 1000),
     ("cdr_bench/Medium-v0", {"scenario": "medium"}, 1000),
     ("cdr_bench/High-v0", {"scenario": "high"}, 1000),
-    ("cdr_bench/HeadOn-v0", {"scenario": "tactical/head-on"}, 60),
-    ("cdr_bench/Crossing-v0", {"scenario": "tactical/crossing"}, 60),
-    ("cdr_bench/Overtaking-v0", {"scenario": "tactical/overtaking"}, 60),
+    ("cdr_bench/HeadOn-v1", {"scenario": "tactical/head-on"}, 60),
+    ("cdr_bench/Crossing-v1", {"scenario": "tactical/crossing"}, 60),
+    ("cdr_bench/Overtaking-v1", {"scenario": "tactical/overtaking"}, 60),
+    ("cdr_bench/HeadOnFixed-v0", {"scenario": "tactical/head-on-fixed"}, 60),
+    ("cdr_bench/CrossingFixed-v0", {"scenario": "tactical/crossing-fixed"}, 60),
+    ("cdr_bench/OvertakingFixed-v0", {"scenario": "tactical/overtaking-fixed"}, 60),
+    # The tactical ids' version 0 was the fixed encounter: it stays what it was.
+    ("cdr_bench/HeadOn-v0", {"scenario": "tactical/head-on-fixed"}, 60),
+    ("cdr_bench/Crossing-v0", {"scenario": "tactical/crossing-fixed"}, 60),
+    ("cdr_bench/Overtaking-v0", {"scenario": "tactical/overtaking-fixed"}, 60),
     *(
         (f"cdr_bench/CurriculumStage{i:02d}-v0", {"scenario": f"curriculum/stage-{i:02d}"}, 1000)
         for i in range(1, 13)
@@ -33,8 +40,11 @@ GYMNASIUM_TASKS: list[tuple[str, dict[str, Any], int | None]] = [
 ]
 """Gymnasium ids registered on import (the ownship's task; learning intruders, if any, hold):
 one per shipped single-agent task, ``max_episode_steps`` = the scenario's horizon (the env also
-ends the episode there, as ``timeout``). ``-v0`` is scenario version 3; an id's version goes up
-whenever its scenario's does. Multi-agent scenarios (``marl/*``) are PettingZoo tasks."""
+ends the episode there, as ``timeout``). An id's version is its scenario's ``version`` minus 3
+(``-v0``: version 3), so it goes up whenever its scenario's does: ``HeadOn-v1``,
+``Crossing-v1``, ``Overtaking-v1`` are the tactical families of version 4 (docs/model.md §8.3);
+their ``-v0`` stays the fixed encounter it always was (also ``HeadOnFixed-v0`` etc.), and
+Gymnasium says so when it is made. Multi-agent scenarios (``marl/*``) are PettingZoo tasks."""
 
 try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
     # Bound eagerly: the function `env` must shadow the submodule `cdr_bench.env`.

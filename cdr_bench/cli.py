@@ -42,6 +42,36 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_scenarios_validate)
     p = sc_sub.add_parser("fields", help="print the scenario format: every field, type and range")
     p.set_defaults(func=_scenarios_fields)
+    p = sc_sub.add_parser(
+        "certify",
+        help="certify a tactical scenario: holding fails, several manoeuvre families succeed "
+        "per episode, the MVP resolver solves 30-90 %% (docs/model.md §8.3)",
+    )
+    p.add_argument("name", help="registry name or YAML path")
+    p.add_argument(
+        "--episodes", type=int, default=1000, help="episodes for holding and the agent (1000)"
+    )
+    p.add_argument(
+        "--search-episodes",
+        type=int,
+        default=200,
+        help="episodes searched for manoeuvre families (200; the first of the same episodes)",
+    )
+    p.add_argument(
+        "--agent",
+        default="agents/mvp",
+        help="the reference resolver, run in this process (trusted code only; 'none' skips it)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="base seed of the episodes (as evaluate)")
+    p.add_argument(
+        "--enough",
+        type=int,
+        default=None,
+        help="stop an episode's search once this many families are found (faster; default: "
+        "search every family)",
+    )
+    p.add_argument("--out", default=None, help="write the full report (JSON) here")
+    p.set_defaults(func=_scenarios_certify)
 
     r = sub.add_parser("render", help="record an episode of a scenario as an animated GIF")
     r.add_argument("scenario", help="registry name or YAML path")
@@ -110,6 +140,67 @@ def _scenarios_fields(args: argparse.Namespace) -> int:
     for path, tp, doc in field_docs():
         print(f"{path:34s} {tp:28s} {doc}")
     return 0
+
+
+def _scenarios_certify(args: argparse.Namespace) -> int:
+    import json
+
+    from cdr_bench.evaluate.results import atomic_write_text
+    from cdr_bench.evaluate.search import FAMILIES, certify
+    from cdr_bench.scenarios import load_scenario
+
+    agent = None if args.agent.lower() == "none" else args.agent
+    if agent is not None and not Path(agent).exists():
+        raise UserError(f"--agent {agent}: no such file or folder (give a path, or 'none')")
+    cfg = load_scenario(args.name)
+    r = certify(
+        cfg,
+        episodes=args.episodes,
+        search_episodes=args.search_episodes,
+        agent=agent,
+        base_seed=args.seed,
+        enough=args.enough,
+    )
+
+    def mark(ok: bool) -> str:
+        return "ok  " if ok else "FAIL"
+
+    def pct(x: float) -> str:
+        return f"{100 * x:.1f} %"
+
+    h, f = r["hold"], r["families"]
+    print(f"{cfg.id} (version {cfg.version}, config {r['config_hash'][:16]}, seed {args.seed})")
+    print(
+        f"{mark(h['ok'])} (a) holding fails in {h['failures']} / {h['episodes']} episodes "
+        f"({pct(h['failure_rate'])}, 95 % CI {pct(h['ci95'][0])}-{pct(h['ci95'][1])}; "
+        f"required {h['required']})  [{h['seconds']} s]"
+    )
+    if f["episodes"]:
+        dist = ", ".join(f"{n}: {c}" for n, c in f["distribution"].items() if c)
+        found = ", ".join(f"{k} {v}" for k, v in f["found"].items())
+        simple = ", ".join(f"{k} {v}" for k, v in f["simple_manoeuvre_succeeds"].items())
+        enough = f", search stopped at {f['enough']} families" if f["enough"] else ""
+        print(
+            f"{mark(f['ok'])} (b) manoeuvre families per episode over {f['episodes']} "
+            f"episodes{enough}: {dist} (mean {f['mean']:.2f}); >= 2 in "
+            f"{pct(f['share_at_least'])}; required {f['required']}  [{f['seconds']} s]"
+        )
+        print(f"       episodes with a success, per family: {found}")
+        print(f"       ... by the plain manoeuvre of the family: {simple}")
+        for ep in f["per_episode"]:
+            if len(ep["families"]) < 2:
+                print(f"       episode {ep['episode']} (seed {ep['seed']}): {ep['families']}")
+    if "agent" in r:
+        a = r["agent"]
+        print(
+            f"{mark(a['ok'])} (c) {a['path']} succeeds in {a['successes']} / {a['episodes']} "
+            f"episodes ({pct(a['success_rate'])}, 95 % CI {pct(a['ci95'][0])}-"
+            f"{pct(a['ci95'][1])}; required {a['required']})  [{a['seconds']} s]"
+        )
+    print(f"{'certified' if r['ok'] else 'NOT certified'} (families: {', '.join(FAMILIES)})")
+    if args.out:
+        atomic_write_text(Path(args.out), json.dumps(r, indent=1) + "\n")
+    return 0 if r["ok"] else 1
 
 
 def _render(args: argparse.Namespace) -> int:

@@ -14,7 +14,8 @@ arrow at the map edge with its distance when outside the view. A scale bar sits 
 
 Zoom (:func:`frame_view`): an explicit encounter (the scenario places the ownship and background
 aircraft, as the tactical scenarios do) is shown close up: the view fits the ownship, the
-aircraft within :data:`ENCOUNTER_RADIUS_KM` of it at the start and its goal when near, and then
+aircraft within :data:`ENCOUNTER_RADIUS_KM` of it at the start (for an aircraft placed by an
+encounter, the square its start can be drawn in) and its goal when near, and then
 follows the ownship at that fixed scale. Anything else shows the whole sector, unless
 ``zoom_km`` asks for a window of that half-width around the ownship (``math.inf``: the whole
 sector, also for an encounter).
@@ -32,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw, ImageFont
 
-from cdr_bench.scenarios.schema import ScenarioConfig
+from cdr_bench.scenarios.schema import ScenarioConfig, encounter_reach_km
 from cdr_bench.sim.core import BOUNDARY, LOS, NMAC, SUCCESS, TIMEOUT, Simulator, StepResult
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 
@@ -135,11 +136,15 @@ def encounter_box(config: ScenarioConfig) -> tuple[float, float, float, float] |
     if start is None or not config.aircraft:
         return None
     ox, oy = start.position_km
-    near = [
-        (a.position_km[0] - ox, a.position_km[1] - oy)
-        for a in config.aircraft
-        if math.hypot(a.position_km[0] - ox, a.position_km[1] - oy) <= ENCOUNTER_RADIUS_KM
-    ]
+    near = []
+    for a in config.aircraft:
+        if a.encounter is not None:  # drawn per episode: the square its start can be in
+            r = encounter_reach_km(config, a.encounter)
+            near += [(-r, -r), (r, r)]
+        elif a.position_km is not None:
+            x, y = a.position_km[0] - ox, a.position_km[1] - oy
+            if math.hypot(x, y) <= ENCOUNTER_RADIUS_KM:
+                near.append((x, y))
     if not near:
         return None
     reach = max(math.hypot(x, y) for x, y in near)

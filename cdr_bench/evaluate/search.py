@@ -1,11 +1,14 @@
-"""Search over ownship action sequences: which first actions can still lead to success?
+"""Search over ownship action sequences: which first actions, which manoeuvre families can
+still lead to success?
 
-Used to certify the tactical scenarios (docs/model.md §8: holding fails, several first actions
-succeed) and to label first actions in the multimodality analysis (docs/model.md §10).
+Used to certify the tactical scenarios (docs/model.md §8.3: holding fails, several manoeuvre
+families succeed in every episode, the MVP resolver solves some but not all; :func:`certify`,
+``cdr-bench scenarios certify``) and to name the manoeuvre families of first actions in the
+multimodality analysis (docs/model.md §10.4).
 
 The search is a fixed family of *follow-on* policies played after a given first action, all
 rolled out in parallel in one :class:`~cdr_bench.vector_env.VectorEnv` (one episode per
-candidate sequence, every episode reset with the same seed). A follow-on policy is
+candidate sequence, each reset with the seed of the episode it searches). A follow-on policy is
 
 1. **turn**: ``turn_steps`` steps of a constant heading change ``turn`` (-1 left, +1 right),
 2. **hold**: ``hold_steps`` steps keeping the heading reached,
@@ -18,17 +21,25 @@ toward ``final_level`` during phase 3, and changing speed one speed step per ste
 ownship reach its goal (outcome ``SUCCESS``); the realised action sequence is the witness.
 Failing to find one is evidence, not proof, that no continuation exists.
 
+:func:`successful_first_actions` searches every first action of one episode;
+:func:`search_families` searches the manoeuvre families (:func:`manoeuvre_family`, each with the
+follow-ons that continue it, :func:`family_follow_ons`) of many episodes at once.
+
 Only the ownship (controlled aircraft 0) is searched; learning intruders, if any, hold.
 """
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.actions import HOLD, N_ACTIONS
+from cdr_bench.actions import HOLD, N_ACTIONS, decode, encode
+from cdr_bench.errors import UserError
+from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim.core import OUTCOME_NAMES, SUCCESS, Simulator
 from cdr_bench.sim.geometry import exact_unit_vector
@@ -106,6 +117,7 @@ def search_batch(
     first_actions: NDArray[np.integer],
     family: dict[str, NDArray[np.float64]],
     seed: int = 0,
+    seeds: NDArray[np.integer] | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int64]]:
     """Roll out every (first action, follow-on) pair of one batch in parallel.
 
@@ -113,7 +125,8 @@ def search_batch(
         config: the scenario.
         first_actions: (E,) first action of each episode.
         family: (E,) follow-on parameters per episode, keys as in :func:`follow_on_family`.
-        seed: episode seed shared by every episode.
+        seed: episode seed shared by every episode (when ``seeds`` is None).
+        seeds: (E,) episode seed of each episode.
 
     Returns:
         ``(actions, outcome, n_steps)``: (E, T) ownship actions played (T <= the scenario
@@ -121,7 +134,7 @@ def search_batch(
     """
     E = len(first_actions)
     env = VectorEnv(config, num_envs=E)
-    env.reset(seeds=np.full(E, seed))
+    env.reset(seeds=np.full(E, seed) if seeds is None else np.asarray(seeds))
     sim = env.sim
     played = np.full((E, sim.max_steps), HOLD, dtype=np.int64)
     act = np.full((E, sim.M), HOLD, dtype=np.int64)
@@ -184,6 +197,388 @@ def successful_first_actions(
             for g in np.flatnonzero(ok.any(axis=1)):
                 e = g * n_rows + int(np.argmax(ok[g]))
                 result[int(group[g])] = [int(x) for x in played[e, : n_steps[e]]]
+    return result
+
+
+# ----------------------------------------------------------------------------------------------
+# Manoeuvre families (docs/model.md §8.3)
+
+FAMILIES = ("left", "right", "climb", "descend", "speed")
+"""The manoeuvre families, in report order."""
+
+
+def manoeuvre_family(action: int) -> str | None:
+    """The family of a first action: a level change is ``climb`` / ``descend`` (whatever it does
+    to heading and speed), else a heading change is ``left`` / ``right``, else a speed change is
+    ``speed``; hold (13) is none."""
+    psi, v, h = decode(action)
+    if h:
+        return "climb" if h > 0 else "descend"
+    if psi:
+        return "right" if psi > 0 else "left"
+    return "speed" if v else None
+
+
+FAMILY_ACTIONS: dict[str, tuple[int, ...]] = {
+    f: tuple(
+        sorted(
+            (a for a in range(N_ACTIONS) if manoeuvre_family(a) == f),
+            key=lambda a: (sum(x != 0 for x in decode(a)), a),
+        )
+    )
+    for f in FAMILIES
+}
+"""The first actions of each family, the purest first (e.g. ``climb``: climb alone, then climb
+with a turn or a speed change, then both)."""
+
+
+def family_follow_ons(
+    family_name: str,
+    first_action: int,
+    level: int,
+    speed_kt: float,
+    grid: dict[str, NDArray[np.float64]],
+) -> NDArray[np.int64]:
+    """Indices into ``grid`` (a :func:`follow_on_family`) of the follow-ons that continue the
+    manoeuvre of ``first_action`` from ``level`` and ``speed_kt`` (the ownship's at the start),
+    so that a success is one of its family and not a later manoeuvre of another:
+
+    * ``left`` / ``right``: the turn phase turns the same way (or not at all); the level stays.
+    * ``climb`` / ``descend``: no turn phase; the manoeuvre phases stay above / below the start
+      level (the return phase may come back).
+    * ``speed``: no turn phase, the level stays, the target speed lies beyond the start speed in
+      the direction of the first action.
+
+    Speeds are free except for ``speed``. So a success of ``climb`` is not a turn flown one
+    level up, nor one of ``left`` a climb after a turn.
+    """
+    psi, v, _ = decode(first_action)
+    turn, lv, final = grid["turn"], grid["level"], grid["final_level"]
+    same_level = (lv == level) & (final == level)
+    if family_name in ("left", "right"):
+        keep = same_level & ((turn == 0) | (turn == psi))
+    elif family_name == "climb":
+        keep = (turn == 0) & (lv > level)
+    elif family_name == "descend":
+        keep = (turn == 0) & (lv < level)
+    elif family_name == "speed":
+        keep = same_level & (turn == 0) & ((grid["speed_kt"] - speed_kt) * v > 0)
+    else:
+        raise ValueError(f"unknown manoeuvre family {family_name!r}; known: {FAMILIES}")
+    return np.flatnonzero(keep)
+
+
+@dataclass
+class FamilySearch:
+    """What :func:`search_families` found in one episode."""
+
+    seed: int
+    """the episode seed"""
+    witnesses: dict[str, list[int]]
+    """family -> a successful ownship action sequence of that family (first success found)"""
+    searched: tuple[str, ...]
+    """the families searched to the end of the follow-ons (others were skipped by ``enough``)"""
+
+    @property
+    def families(self) -> list[str]:
+        """The families with a witness, in :data:`FAMILIES` order."""
+        return [f for f in FAMILIES if f in self.witnesses]
+
+
+CHUNKS = (1, 8, 64, 512)
+"""Follow-ons per (episode, family, first action) in successive passes of
+:func:`search_families` (then the rest): a family is dropped from later passes once found."""
+
+
+def search_families(
+    config: ScenarioConfig,
+    seeds: list[int] | NDArray[np.integer],
+    grid: dict[str, NDArray[np.float64]] | None = None,
+    enough: int | None = None,
+    max_batch: int = 1 << 15,
+) -> list[FamilySearch]:
+    """For each episode seed, the manoeuvre families with a successful continuation.
+
+    Every (episode, family, feasible first action of the family, follow-on of the family,
+    :func:`family_follow_ons`) is a candidate; all candidates of a pass run in parallel (every
+    episode in the same :class:`VectorEnv` batches). Passes take the follow-ons in grid order
+    (simplest first) in chunks (:data:`CHUNKS`) and stop a family at its first success.
+
+    Args:
+        config: the scenario.
+        seeds: episode seeds (e.g. the evaluation's, from
+            :func:`~cdr_bench.evaluate.seeds.episode_seeds`).
+        grid: follow-on policies (default :func:`follow_on_family`).
+        enough: stop searching an episode once this many families are found (its other
+            families are then not in ``searched``); None searches every family to the end.
+        max_batch: most rollouts simulated at once (about 1 kB each).
+
+    Returns:
+        One :class:`FamilySearch` per seed, in order.
+    """
+    fam = follow_on_family() if grid is None else grid
+    seeds_arr = np.asarray([int(x) for x in seeds], dtype=np.uint64)
+    n = len(seeds_arr)
+    env = VectorEnv(config, num_envs=max(n, 1))
+    if n:
+        env.reset(seeds=seeds_arr)
+    level = env.sim.ac_level[:n, 0].copy()
+    speed = env.sim.ac_speed_kt[:n, 0].copy()
+    masks = env.sim.action_masks()[:n, 0]
+    # The candidates of every (episode, family): (first action, follow-on index) in order.
+    todo: dict[tuple[int, str], list[tuple[int, int]]] = {}
+    for e in range(n):
+        for f in FAMILIES:
+            cands = []
+            for a in FAMILY_ACTIONS[f]:
+                if masks[e, a]:
+                    js = family_follow_ons(f, a, int(level[e]), float(speed[e]), fam)
+                    cands += [(a, int(j)) for j in js]
+            if cands:
+                todo[(e, f)] = cands
+    found: list[dict[str, list[int]]] = [{} for _ in range(n)]
+    bounds = [0, *itertools.accumulate(CHUNKS)]
+    pass_ranges = list(itertools.pairwise(bounds)) + [(bounds[-1], None)]
+    exhausted: set[tuple[int, str]] = set()
+    for lo, hi in pass_ranges:
+        open_ = [
+            key
+            for key in todo
+            if key[1] not in found[key[0]] and (enough is None or len(found[key[0]]) < enough)
+        ]
+        if hi is None:
+            exhausted = set(open_)
+        rows = []  # (key, first action, follow-on) in candidate order
+        for key in open_:
+            per_action: dict[int, list[int]] = {}
+            for a, j in todo[key]:
+                per_action.setdefault(a, []).append(j)
+            for a, follow in per_action.items():
+                rows += [(key, a, j) for j in follow[lo:hi]]
+        for i in range(0, len(rows), max_batch):
+            part = rows[i : i + max_batch]
+            ep = np.array([r[0][0] for r in part])
+            sub = {k: v[np.array([r[2] for r in part])] for k, v in fam.items()}
+            played, outcome, n_steps = search_batch(
+                config, np.array([r[1] for r in part]), sub, seeds=seeds_arr[ep]
+            )
+            for r, (key, _, _) in enumerate(part):
+                e, f = key
+                if outcome[r] == SUCCESS and f not in found[e]:
+                    found[e][f] = [int(x) for x in played[r, : n_steps[r]]]
+    return [
+        FamilySearch(
+            int(seeds_arr[e]),
+            found[e],
+            tuple(
+                f for f in FAMILIES if f in found[e] or (e, f) in exhausted or (e, f) not in todo
+            ),
+        )
+        for e in range(n)
+    ]
+
+
+# ----------------------------------------------------------------------------------------------
+# Certification of a tactical family (docs/model.md §8.3)
+
+HOLD_FAILS_AT_LEAST = 0.95
+"""Holding must fail in at least this share of the episodes."""
+MIN_FAMILIES = 2
+"""Every searched episode needs at least this many manoeuvre families with a success."""
+AGENT_SOLVES = (0.30, 0.90)
+"""The reference resolver's success rate must lie in this range: hard, not impossible."""
+DEFAULT_AGENT = "agents/mvp"
+"""The reference resolver of the certification (a path in the repository)."""
+
+SIMPLE_MANOEUVRES: dict[str, tuple[int, dict[str, float]]] = {
+    "left": (encode((-1, 0, 0)), {"turn": -1, "turn_steps": 3, "hold_steps": 2}),
+    "right": (encode((1, 0, 0)), {"turn": 1, "turn_steps": 3, "hold_steps": 2}),
+    "climb": (encode((0, 0, 1)), {"level": +1, "final_level": +1}),
+    "descend": (encode((0, 0, -1)), {"level": -1, "final_level": -1}),
+    "speed": (encode((0, -1, 0)), {"speed_kt": -100.0}),
+}
+"""The plainest manoeuvre of each family (first action, follow-on relative to the start): a
+20 deg turn held for 2 steps, then back to the goal; a climb or descent of one level, kept to
+the end; slowing down by 100 kt. How often they fail shows how often a constraint bites."""
+
+
+def _simple_follow_on(family_name: str, level: int, speed_kt: float) -> dict[str, float]:
+    rel = SIMPLE_MANOEUVRES[family_name][1]
+    row = {
+        "turn": rel.get("turn", 0),
+        "turn_steps": rel.get("turn_steps", 0),
+        "hold_steps": rel.get("hold_steps", 0),
+        "speed_kt": speed_kt + rel.get("speed_kt", 0.0),
+        "level": level + rel.get("level", 0),
+        "final_level": level + rel.get("final_level", 0),
+    }
+    return {k: float(v) for k, v in row.items()}
+
+
+def hold_outcomes(config: ScenarioConfig, seeds: list[int]) -> NDArray[np.int8]:
+    """Outcome code of the ownship holding course, speed and level (action 13) every step, one
+    per episode seed."""
+    env = VectorEnv(config, num_envs=len(seeds))
+    env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
+    act = np.full((len(seeds), env.n_agents), HOLD, dtype=np.int64)
+    while env.flying[:, 0].any():
+        env.step(act)
+    return env.sim.ac_outcome[:, 0].copy()
+
+
+def agent_outcomes(
+    config: ScenarioConfig, agent_path: str, base_seed: int, n_episodes: int, batch_size: int
+) -> NDArray[np.int8]:
+    """Outcome codes of the ownship flown by the agent at ``agent_path`` on the first
+    ``n_episodes`` episodes of the evaluation (same seeds, same batches, same ``reset`` seeds as
+    ``cdr-bench evaluate``; learning intruders, if any, hold). The agent runs IN THIS PROCESS:
+    only for trusted agents such as the shipped ``agents/mvp``."""
+    from gymnasium import spaces
+
+    from cdr_bench.evaluate.loader import load_agent
+    from cdr_bench.evaluate.runner import batch_seed
+    from cdr_bench.vector_env import observation_space
+
+    agent = load_agent(agent_path, observation_space(config), spaces.Discrete(N_ACTIONS))
+    chash = config.config_hash()
+    out = []
+    for b, start in enumerate(range(0, n_episodes, batch_size)):
+        seeds = episode_seeds(
+            base_seed, config.id, chash, start, min(start + batch_size, n_episodes)
+        )
+        env = VectorEnv(config, num_envs=len(seeds))
+        obs, masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
+        agent.reset(batch_seed(base_seed, config.id, chash, b))
+        act = np.full((len(seeds), env.n_agents), HOLD, dtype=np.int64)
+        while env.flying[:, 0].any():
+            flying = env.flying[:, 0]
+            act[:, 0] = HOLD
+            act[flying, 0] = np.asarray(agent.act_batch(obs[flying, 0], masks[flying, 0]))
+            step = env.step(act)
+            obs, masks = step.obs, step.action_mask
+        out.append(env.sim.ac_outcome[:, 0].copy())
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int8)
+
+
+def certify(
+    config: ScenarioConfig,
+    episodes: int = 1000,
+    search_episodes: int = 200,
+    agent: str | None = DEFAULT_AGENT,
+    base_seed: int = 0,
+    enough: int | None = None,
+    batch_size: int = 200,
+) -> dict[str, Any]:
+    """Certify a tactical family on the evaluation's episodes (docs/model.md §8.3).
+
+    (a) holding (action 13 every step) fails in at least :data:`HOLD_FAILS_AT_LEAST` of the
+    first ``episodes`` episodes; (b) in each of the first ``search_episodes`` episodes at least
+    :data:`MIN_FAMILIES` manoeuvre families have a successful continuation
+    (:func:`search_families`; with ``enough`` an episode's search stops once that many are found);
+    (c) the agent at ``agent`` (default the MVP resolver, run in this process; None skips it)
+    succeeds in a share of the first ``episodes`` episodes within :data:`AGENT_SOLVES`.
+
+    Returns:
+        A JSON-ready report: ``hold``, ``families`` (per episode, the families found), ``agent``
+        (success rate and Wilson interval), each with ``ok``, and ``ok`` for all three.
+    """
+    import time
+
+    from cdr_bench.evaluate.metrics import wilson_interval
+
+    if episodes < 1 or search_episodes < 0:
+        raise UserError(
+            f"expected at least 1 episode and 0 or more search episodes, got {episodes} and "
+            f"{search_episodes}"
+        )
+    chash = config.config_hash()
+    seeds = episode_seeds(base_seed, config.id, chash, 0, max(episodes, search_episodes))
+    report: dict[str, Any] = {
+        "scenario": config.id,
+        "version": config.version,
+        "config_hash": chash,
+        "base_seed": base_seed,
+    }
+
+    t0 = time.perf_counter()
+    hold = hold_outcomes(config, seeds[:episodes])
+    k = int((hold != SUCCESS).sum())
+    report["hold"] = {
+        "episodes": episodes,
+        "failures": k,
+        "failure_rate": k / episodes,
+        "ci95": list(wilson_interval(k, episodes)),
+        "required": f">= {HOLD_FAILS_AT_LEAST}",
+        "ok": k / episodes >= HOLD_FAILS_AT_LEAST,
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
+
+    t0 = time.perf_counter()
+    found = search_families(config, seeds[:search_episodes], enough=enough)
+    counts = [len(r.families) for r in found]
+    at_least = sum(c >= MIN_FAMILIES for c in counts)
+    simple = _simple_successes(config, seeds[:search_episodes])
+    report["families"] = {
+        "episodes": search_episodes,
+        "enough": enough,
+        "per_episode": [
+            {"episode": i, "seed": r.seed, "families": r.families, "searched": list(r.searched)}
+            for i, r in enumerate(found)
+        ],
+        "distribution": {str(n): counts.count(n) for n in range(len(FAMILIES) + 1)},
+        "mean": float(np.mean(counts)) if counts else None,
+        "found": {f: sum(f in r.witnesses for r in found) for f in FAMILIES},
+        "simple_manoeuvre_succeeds": simple,
+        "share_at_least": at_least / search_episodes if search_episodes else None,
+        "required": f"every episode >= {MIN_FAMILIES} families",
+        "ok": at_least == search_episodes,
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
+
+    if agent is not None:
+        t0 = time.perf_counter()
+        outcome = agent_outcomes(config, agent, base_seed, episodes, batch_size)
+        k = int((outcome == SUCCESS).sum())
+        lo, hi = AGENT_SOLVES
+        report["agent"] = {
+            "path": str(agent),
+            "episodes": episodes,
+            "successes": k,
+            "success_rate": k / episodes,
+            "ci95": list(wilson_interval(k, episodes)),
+            "outcomes": {
+                name: int((outcome == code).sum()) for code, name in OUTCOME_NAMES.items()
+            },
+            "required": f"in [{lo}, {hi}]",
+            "ok": lo <= k / episodes <= hi,
+            "seconds": round(time.perf_counter() - t0, 2),
+        }
+    parts = [report["hold"], report["families"]] + ([report["agent"]] if agent else [])
+    report["ok"] = all(p["ok"] for p in parts)
+    return report
+
+
+def _simple_successes(config: ScenarioConfig, seeds: list[int]) -> dict[str, int]:
+    """Per family, the episodes in which its plain manoeuvre (:data:`SIMPLE_MANOEUVRES`)
+    succeeds (where its first action is feasible)."""
+    if not seeds:
+        return {f: 0 for f in FAMILIES}
+    n = len(seeds)
+    env = VectorEnv(config, num_envs=n)
+    env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
+    level, speed = env.sim.ac_level[:, 0], env.sim.ac_speed_kt[:, 0]
+    masks = env.sim.action_masks()[:, 0]
+    rows = [(e, f) for f in FAMILIES for e in range(n) if masks[e, SIMPLE_MANOEUVRES[f][0]]]
+    result = {f: 0 for f in FAMILIES}
+    if not rows:
+        return result
+    grid = [_simple_follow_on(f, int(level[e]), float(speed[e])) for e, f in rows]
+    fam = {k: np.array([g[k] for g in grid]) for k in grid[0]}
+    first = np.array([SIMPLE_MANOEUVRES[f][0] for _, f in rows])
+    seed_arr = np.asarray(seeds, dtype=np.uint64)[[e for e, _ in rows]]
+    _, outcome, _ = search_batch(config, first, fam, seeds=seed_arr)
+    for (_, f), o in zip(rows, outcome, strict=True):
+        result[f] += int(o == SUCCESS)
     return result
 
 

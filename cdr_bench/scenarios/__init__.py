@@ -4,7 +4,9 @@ from cdr_bench.scenarios.loader import list_scenarios, load_scenario, registry_r
 from cdr_bench.scenarios.schema import (
     Aircraft,
     Airway,
+    Encounter,
     LearningIntruder,
+    PlacedAircraft,
     ScenarioConfig,
     ScenarioError,
     field_docs,
@@ -14,7 +16,9 @@ from cdr_bench.scenarios.schema import (
 __all__ = [
     "Aircraft",
     "Airway",
+    "Encounter",
     "LearningIntruder",
+    "PlacedAircraft",
     "ScenarioConfig",
     "ScenarioError",
     "field_docs",

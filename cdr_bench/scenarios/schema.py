@@ -44,6 +44,9 @@ MAX_NAME_CHARS = 128
 """Longest scenario id or registry name."""
 MAX_TEXT_CHARS = 500
 """Longest description."""
+KM_PER_S_PER_KT = 1.852 / 3600.0
+"""km/s in one knot (:data:`cdr_bench.sim.units.KM_PER_S_PER_KT`; the schema sits below the
+simulator)."""
 
 _NAME_PART = r"[A-Za-z0-9_][A-Za-z0-9._+-]*"
 _NAME = re.compile(rf"{_NAME_PART}(?:/{_NAME_PART})*")
@@ -57,19 +60,36 @@ def _spec(
     hi: float | None = None,
     *,
     max_items: int | None = None,
+    min_items: int | None = None,
     max_chars: int | None = None,
     name: bool = False,
+    unless: str | None = None,
     **kw: Any,
 ) -> Any:
     """A dataclass field with a docstring, an inclusive numeric range (of each number of a
-    point), the most items of a list, the most characters of a text, or a name's rules."""
+    point, a range or a list), the fewest and most items of a list, the most characters of a
+    text, or a name's rules. ``unless``: the field is required unless that other field is
+    given, and may not be given with it."""
     meta = {"doc": doc, "min": lo, "max": hi, "max_items": max_items, "name": name}
+    if min_items is not None:
+        meta["min_items"] = min_items
     if max_chars is not None:
         meta["max_chars"] = max_chars
+    if unless is not None:
+        meta["unless"] = unless
     return field(metadata=meta, **kw)
 
 
 Point = tuple[float, float]
+Range = float | tuple[float, float]
+"""A number (fixed) or ``[lo, hi]``, drawn uniformly per episode (docs/model.md §8.3)."""
+
+
+def range_bounds(value: Range) -> tuple[float, float]:
+    """``(lo, hi)`` of a :data:`Range` (``(x, x)`` for a fixed number)."""
+    if isinstance(value, tuple):
+        return value
+    return (value, value)
 
 
 @dataclass(frozen=True)
@@ -90,6 +110,78 @@ class Aircraft:
     heading_deg: float = _spec("heading in degrees clockwise from north", 0.0, 360.0)
     speed_kt: float = _spec("ground speed in knots", 0.0, 1000.0)
     level: int = _spec("flight level index", 0, 2)
+
+
+@dataclass(frozen=True)
+class Encounter:
+    """An aircraft placed relative to the ownship's nominal flight (straight at its start
+    heading and speed): it reaches the closest point of approach (CPA) with the ownship after
+    ``time_to_cpa_s``, passing at ``miss_km``. Each value is a number or ``[lo, hi]``, drawn
+    uniformly per episode from the episode's seed (docs/model.md §8.3)."""
+
+    time_to_cpa_s: Range = _spec(
+        "time until the closest point of approach with the ownship's straight flight, s: a "
+        "number or [lo, hi] drawn per episode",
+        0.0,
+        3600.0,
+    )
+    angle_deg: Range = _spec(
+        "track minus the ownship's start heading, deg clockwise (180: head-on, 90: from the "
+        "left, -90: from the right, 0: same direction): a number or [lo, hi]",
+        -360.0,
+        360.0,
+    )
+    miss_km: Range = _spec(
+        "signed horizontal distance at the closest point of approach, km, positive when the "
+        "aircraft is then on the ownship's right: a number or [lo, hi]",
+        -1000.0,
+        1000.0,
+    )
+    speed_kt: Range = _spec("ground speed in knots: a number or [lo, hi]", 1.0, 1000.0)
+    level: int | tuple[int, ...] = _spec(
+        "flight level index, or a list of distinct levels drawn uniformly per episode",
+        0,
+        2,
+        min_items=1,
+        max_items=3,
+    )
+    mirror: bool = _spec(
+        "with probability 1/2 per episode the encounter is mirrored across the ownship's track "
+        "(angle_deg and miss_km change sign)",
+        default=False,
+    )
+
+
+@dataclass(frozen=True)
+class PlacedAircraft:
+    """A background aircraft placed explicitly: at a fixed position (``position_km``,
+    ``heading_deg``, ``speed_kt``, ``level``) or by an ``encounter`` with the ownship."""
+
+    position_km: Point | None = _spec(
+        "initial position [x, y] in km, inside the sector (unless 'encounter')",
+        -MAX_COORD_KM,
+        MAX_COORD_KM,
+        unless="encounter",
+        default=None,
+    )
+    heading_deg: float | None = _spec(
+        "heading in degrees clockwise from north (unless 'encounter')",
+        0.0,
+        360.0,
+        unless="encounter",
+        default=None,
+    )
+    speed_kt: float | None = _spec(
+        "ground speed in knots (unless 'encounter')", 0.0, 1000.0, unless="encounter", default=None
+    )
+    level: int | None = _spec(
+        "flight level index (unless 'encounter')", 0, 2, unless="encounter", default=None
+    )
+    encounter: Encounter | None = _spec(
+        "placed relative to the ownship's straight flight, drawn per episode (needs "
+        "ownship.start; instead of position_km, heading_deg, speed_kt, level)",
+        default=None,
+    )
 
 
 @dataclass(frozen=True)
@@ -227,8 +319,8 @@ class ScenarioConfig:
         max_items=MAX_AIRWAYS,
         default=(),
     )
-    aircraft: tuple[Aircraft, ...] = _spec(
-        f"explicitly placed background aircraft (at most {MAX_AIRCRAFT})",
+    aircraft: tuple[PlacedAircraft, ...] = _spec(
+        f"explicitly placed background aircraft, fixed or by encounter (at most {MAX_AIRCRAFT})",
         max_items=MAX_AIRCRAFT,
         default=(),
     )
@@ -278,7 +370,8 @@ def _type_name(tp: Any) -> str:
     if origin is tuple:
         args = typing.get_args(tp)
         if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_type_name(args[0])}"
+            plural = {int: "integers", float: "numbers"}.get(args[0])
+            return f"a list of {plural or _type_name(args[0])}"
         return f"a list of {len(args)} numbers"
     if dataclasses.is_dataclass(tp):
         return "a mapping"
@@ -322,6 +415,12 @@ def _convert(value: Any, tp: Any, path: str, meta: dict[str, Any], problems: Pro
         if value is None and type(None) in args:
             return None
         non_none = [a for a in args if a is not type(None)]
+        if len(non_none) > 1:  # a number or a list (a range, a choice of levels)
+            listed = isinstance(value, (list, tuple))
+            arm = [a for a in non_none if (typing.get_origin(a) is tuple) == listed]
+            if not arm:
+                return bad(f"expected {_type_name(tp)}, got {short_repr(value)}")
+            return _convert(value, arm[0], path, meta, problems)
         return _convert(value, non_none[0], path, meta, problems)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
@@ -335,8 +434,13 @@ def _convert(value: Any, tp: Any, path: str, meta: dict[str, Any], problems: Pro
             most = meta.get("max_items")
             if most is not None and len(value) > most:
                 return bad(f"expected at most {most} items, got {len(value)}")
+            fewest = meta.get("min_items")
+            if fewest is not None and len(value) < fewest:
+                return bad(f"expected at least {fewest} item(s), got {len(value)}")
+            item_meta = {"min": meta.get("min"), "max": meta.get("max")}
             items = [
-                _convert(v, args[0], f"{path}[{i}]", {}, problems) for i, v in enumerate(value)
+                _convert(v, args[0], f"{path}[{i}]", item_meta, problems)
+                for i, v in enumerate(value)
             ]
         else:
             if len(value) != len(args):
@@ -412,11 +516,28 @@ def _build(cls: Any, data: dict[Any, Any], prefix: str, problems: Problems) -> A
     kwargs = {}
     for name, f in fields.items():
         path = f"{prefix}.{name}" if prefix else name
+        unless = f.metadata.get("unless")
+        if unless is not None:  # one of two alternatives (null counts as not given)
+            given, other = data.get(name) is not None, data.get(unless) is not None
+            if given and other:
+                problems.append((path, f"expected either {unless!r} or {name!r}, not both"))
+                continue
+            if not given and not other:
+                problems.append(
+                    (path, f"missing required field ({_type_name(_non_null(hints[name]))})")
+                )
+                continue
         if name in data:
             kwargs[name] = _convert(data[name], hints[name], path, dict(f.metadata), problems)
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             problems.append((path, f"missing required field ({_type_name(hints[name])})"))
     return _INVALID if len(problems) > before else cls(**kwargs)
+
+
+def _non_null(tp: Any) -> Any:
+    """``X`` of ``X | None``."""
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    return args[0] if len(args) == 1 else tp
 
 
 def from_mapping(data: dict[str, Any], source: str = "") -> ScenarioConfig:
@@ -499,8 +620,10 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
             )
     inside = f"expected a point inside the sector [0, {size:g}] km"
     for i, ac in enumerate(cfg.aircraft):
-        if not _inside(ac.position_km, size):
+        if ac.position_km is not None and not _inside(ac.position_km, size):
             out.append((f"aircraft[{i}].position_km", inside))
+        if ac.encounter is not None:
+            out += _encounter_problems(cfg, ac.encounter, f"aircraft[{i}].encounter")
     if o.goal_km is not None and not _inside(o.goal_km, size):
         out.append(("ownship.goal_km", inside))
     if o.start is None:
@@ -513,7 +636,8 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
         out.append(("ownship.start.position_km", inside))
     for i, ac in enumerate(cfg.aircraft):
         if (
-            ac.level == o.start.level
+            ac.position_km is not None
+            and ac.level == o.start.level
             and math.dist(ac.position_km, o.start.position_km) < cfg.separation.nmac_km
         ):
             out.append(
@@ -521,6 +645,49 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
                     f"aircraft[{i}].position_km",
                     f"expected at least separation.nmac_km ({cfg.separation.nmac_km:g} km) from "
                     "the ownship's start at its level (an NMAC before the first step)",
+                )
+            )
+    return out
+
+
+def encounter_reach_km(cfg: ScenarioConfig, enc: Encounter) -> float:
+    """Farthest distance, km, of an encounter's start from the ownship's start: the ownship
+    flies ``time_to_cpa_s`` at its start speed, the aircraft at ``speed_kt``, apart by at most
+    ``|miss_km|`` at the closest point of approach (needs ``ownship.start``)."""
+    start = cfg.ownship.start
+    assert start is not None
+    t_hi = range_bounds(enc.time_to_cpa_s)[1]
+    v_hi = range_bounds(enc.speed_kt)[1]
+    miss = max(abs(x) for x in range_bounds(enc.miss_km))
+    return (start.speed_kt + v_hi) * KM_PER_S_PER_KT * t_hi + miss
+
+
+def _encounter_problems(cfg: ScenarioConfig, enc: Encounter, path: str) -> Problems:
+    """Ranges ordered, distinct levels, an explicit ownship start, and every start it can draw
+    inside the sector."""
+    out: Problems = []
+    for name in ("time_to_cpa_s", "angle_deg", "miss_km", "speed_kt"):
+        lo, hi = range_bounds(getattr(enc, name))
+        if lo > hi:
+            out.append((f"{path}.{name}", f"expected [lo, hi] with lo <= hi, got [{lo}, {hi}]"))
+    if isinstance(enc.level, tuple) and len(set(enc.level)) != len(enc.level):
+        out.append((f"{path}.level", f"expected distinct levels, got {list(enc.level)}"))
+    start, size = cfg.ownship.start, cfg.sector.size_km
+    if start is None:
+        out.append(
+            (path, "expected an explicit ownship.start (an encounter is placed relative to it)")
+        )
+    elif not out:
+        reach = encounter_reach_km(cfg, enc)
+        x, y = start.position_km
+        if min(x, y) - reach < 0.0 or max(x, y) + reach > size:
+            out.append(
+                (
+                    path,
+                    f"a start can be drawn up to {reach:.1f} km from the ownship's start "
+                    "((ownship speed + speed_kt) x time_to_cpa_s + |miss_km|, upper bounds), "
+                    f"outside the sector [0, {size:g}] km; expected shorter times or slower "
+                    "speeds",
                 )
             )
     return out

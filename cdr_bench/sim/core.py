@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS, action_mask
 from cdr_bench.errors import ScenarioError
-from cdr_bench.scenarios.schema import ScenarioConfig
+from cdr_bench.scenarios.schema import ScenarioConfig, range_bounds
 from cdr_bench.sim import kernels as k
 from cdr_bench.sim.geometry import exact_unit_vector, heading_deg
 from cdr_bench.sim.observation import observation_bounds
@@ -234,6 +234,31 @@ class Simulator:
             own[k.O_SPEED] = o.start.speed_kt
             own[k.O_LEVEL] = o.start.level
             own[k.O_GOAL_X], own[k.O_GOAL_Y] = o.goal_km
+        x_pos = np.zeros((X, 2))
+        x_dir = np.zeros((X, 2))
+        x_speed = np.zeros(X)
+        x_level = np.zeros(X, dtype=np.int64)
+        x_enc = np.zeros((X, k.N_ENC_PARAMS))
+        x_enc_level = np.zeros((X, 4), dtype=np.int64)
+        for i, a in enumerate(cfg.aircraft):
+            enc = a.encounter
+            if enc is None:  # fixed (the schema requires every value)
+                assert a.position_km is not None and a.heading_deg is not None
+                assert a.speed_kt is not None and a.level is not None
+                x_pos[i] = a.position_km
+                x_dir[i] = exact_unit_vector(a.heading_deg)
+                x_speed[i] = a.speed_kt * KM_PER_S_PER_KT
+                x_level[i] = a.level
+                continue
+            x_enc[i, k.X_HAS] = 1.0
+            x_enc[i, k.X_T_LO], x_enc[i, k.X_T_HI] = range_bounds(enc.time_to_cpa_s)
+            x_enc[i, k.X_A_LO], x_enc[i, k.X_A_HI] = range_bounds(enc.angle_deg)
+            x_enc[i, k.X_M_LO], x_enc[i, k.X_M_HI] = range_bounds(enc.miss_km)
+            x_enc[i, k.X_S_LO], x_enc[i, k.X_S_HI] = range_bounds(enc.speed_kt)
+            x_enc[i, k.X_MIRROR] = float(enc.mirror)
+            levels = enc.level if isinstance(enc.level, tuple) else (enc.level,)
+            x_enc_level[i, 0] = len(levels)
+            x_enc_level[i, 1 : 1 + len(levels)] = levels
         low, high = observation_bounds(cfg)
         self.obs_bounds = (low.astype(np.float64), high.astype(np.float64))
         """(low, high) of the observation Box, float64 (F,) each"""
@@ -246,10 +271,12 @@ class Simulator:
             route_len=self.route_length_km,
             route_len_slot=np.repeat(self.route_length_km, self.C),
             spacing=self.route_spacing_km,
-            x_pos=np.array([a.position_km for a in cfg.aircraft], dtype=float).reshape(X, 2),
-            x_dir=np.array([exact_unit_vector(a.heading_deg) for a in cfg.aircraft]).reshape(X, 2),
-            x_speed=np.array([a.speed_kt * KM_PER_S_PER_KT for a in cfg.aircraft]).reshape(X),
-            x_level=np.array([a.level for a in cfg.aircraft], dtype=np.int64).reshape(X),
+            x_pos=x_pos,
+            x_dir=x_dir,
+            x_speed=x_speed,
+            x_level=x_level,
+            x_enc=x_enc,
+            x_enc_level=x_enc_level,
             li_start=li_start,
             li_goal=li_goal,
             li_dir=li_vec / np.maximum(li_len, 1e-9)[:, None],

@@ -98,6 +98,23 @@ N_FLOAT_PARAMS = 28
 # Explicit ownship start (the ``own_fixed`` array; ``has`` = 0 for a random start).
 O_HAS, O_X, O_Y, O_DIR_X, O_DIR_Y, O_SPEED, O_LEVEL, O_GOAL_X, O_GOAL_Y = range(9)
 
+# Encounter of an explicit aircraft (a row of the ``x_enc`` array; ``has`` = 0 for a fixed one):
+# [lo, hi] of the time to CPA (s), the angle to the ownship's heading (deg), the signed miss
+# distance (km) and the speed (kt), and whether it may be mirrored.
+(
+    X_HAS,
+    X_T_LO,
+    X_T_HI,
+    X_A_LO,
+    X_A_HI,
+    X_M_LO,
+    X_M_HI,
+    X_S_LO,
+    X_S_HI,
+    X_MIRROR,
+) = range(10)
+N_ENC_PARAMS = 10
+
 VEL_SCALE_KM_S = 1000.0 * KM_PER_S_PER_KT
 """Velocity normalisation of the observation: 1000 kt in km/s."""
 
@@ -147,6 +164,10 @@ class Constants(NamedTuple):
     """(X,) their speeds, km/s"""
     x_level: np.ndarray
     """(X,) their levels"""
+    x_enc: np.ndarray
+    """(X, 10) their encounters, indices ``X_*`` (``X_HAS`` = 0: the fixed values above)"""
+    x_enc_level: np.ndarray
+    """(X, 4) the levels an encounter draws from: count, then the levels"""
     li_start: np.ndarray
     """(M - 1, 2) learning intruders: starts (their airway's entry), km"""
     li_goal: np.ndarray
@@ -240,14 +261,102 @@ def _below(state: np.ndarray, n: int) -> int:
     return int(((_next_u64(state) >> _U11) * np.uint64(n)) >> _U53)
 
 
+# Sine and cosine of an angle in degrees from + - * / only (the angles of encounters, drawn per
+# episode): the angle is reduced to [-45, 45] degrees around a multiple of 90, and Taylor
+# series to x^17 / x^18 (terms below 1e-19 left out) are summed by Horner's rule in a fixed
+# order. Within 2 ulp of sin and cos, and the same bits on every CPU.
+_DEG = 3.141592653589793 / 180.0
+_S3, _S5, _S7, _S9 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0
+_S11, _S13 = -1.0 / 39916800.0, 1.0 / 6227020800.0
+_S15, _S17 = -1.0 / 1307674368000.0, 1.0 / 355687428096000.0
+_C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
+_C10, _C12 = -1.0 / 3628800.0, 1.0 / 479001600.0
+_C14, _C16 = -1.0 / 87178291200.0, 1.0 / 20922789888000.0
+_C18 = -1.0 / 6402373705728000.0
+
+
+@njit(cache=True)
+def sin_cos_deg(angle_deg):
+    """(sin, cos) of ``angle_deg`` in [-720, 720] degrees (see the comment above)."""
+    k = int(angle_deg / 90.0 + 8.5) - 8  # nearest multiple of 90 degrees (truncation >= 0)
+    x = (angle_deg - 90.0 * k) * _DEG
+    x2 = x * x
+    sn = _S15 + x2 * _S17
+    sn = _S13 + x2 * sn
+    sn = _S11 + x2 * sn
+    sn = _S9 + x2 * sn
+    sn = _S7 + x2 * sn
+    sn = _S5 + x2 * sn
+    sn = _S3 + x2 * sn
+    sn = x + x * (x2 * sn)
+    cs = _C16 + x2 * _C18
+    cs = _C14 + x2 * cs
+    cs = _C12 + x2 * cs
+    cs = _C10 + x2 * cs
+    cs = _C8 + x2 * cs
+    cs = _C6 + x2 * cs
+    cs = _C4 + x2 * cs
+    cs = _C2 + x2 * cs
+    cs = 1.0 + x2 * cs
+    q = (k + 8) % 4
+    if q == 0:
+        return sn, cs
+    if q == 1:
+        return cs, -sn
+    if q == 2:
+        return -sn, -cs
+    return -cs, sn
+
+
 # ----------------------------------------------------------------------------------------------
 # Reset
 
 
 @njit(cache=True)
+def _place_encounter(e, rs, s, c, i, b):
+    """Explicit aircraft ``i`` (background slot ``b``) by its encounter with the ownship's
+    straight flight (docs/model.md §8.3). Six draws, always in this order: time to CPA, angle,
+    miss distance, speed, level, mirror."""
+    t = _uniform(rs, c.x_enc[i, X_T_LO], c.x_enc[i, X_T_HI])
+    angle = _uniform(rs, c.x_enc[i, X_A_LO], c.x_enc[i, X_A_HI])
+    miss = _uniform(rs, c.x_enc[i, X_M_LO], c.x_enc[i, X_M_HI])
+    speed = _uniform(rs, c.x_enc[i, X_S_LO], c.x_enc[i, X_S_HI]) * KM_PER_S_PER_KT
+    level = c.x_enc_level[i, 1 + _below(rs, c.x_enc_level[i, 0])]
+    flip = _below(rs, 2)
+    if c.x_enc[i, X_MIRROR] != 0.0 and flip == 1:
+        angle = -angle
+        miss = -miss
+    ux, uy = c.own_fixed[O_DIR_X], c.own_fixed[O_DIR_Y]  # the ownship's heading vector
+    v0 = c.own_fixed[O_SPEED] * KM_PER_S_PER_KT
+    sa, ca = sin_cos_deg(angle)
+    dx = ux * ca + uy * sa  # the heading rotated clockwise by the angle
+    dy = uy * ca - ux * sa
+    vx, vy = dx * speed, dy * speed
+    wx, wy = vx - ux * v0, vy - uy * v0  # velocity relative to the ownship
+    ww = math.sqrt(wx * wx + wy * wy)
+    rx, ry = uy, -ux  # the ownship's right
+    nx, ny = rx, ry  # no relative motion: the miss is measured to the right
+    if ww > 1e-12:
+        nx, ny = wy / ww, -wx / ww  # across the relative motion, to the ownship's right
+        side = nx * rx + ny * ry
+        if side < 0.0 or (side == 0.0 and nx * ux + ny * uy < 0.0):
+            nx, ny = -nx, -ny
+    # At time t the ownship is at start + v0 t and this aircraft ``miss`` across from it.
+    cx = c.own_fixed[O_X] + ux * v0 * t + miss * nx
+    cy = c.own_fixed[O_Y] + uy * v0 * t + miss * ny
+    s.pos[e, b, 0] = cx - vx * t
+    s.pos[e, b, 1] = cy - vy * t
+    s.vel[e, b, 0] = vx
+    s.vel[e, b, 1] = vy
+    s.level[e, b] = level
+    s.active[e, b] = True
+
+
+@njit(cache=True)
 def _populate_traffic(e, rs, s, c):
     """Steady state: each airway holds ``per_route`` aircraft one spacing apart, random phase;
-    levels cyclic in spawn order. Then the explicitly placed aircraft."""
+    levels cyclic in spawn order. Then the explicitly placed aircraft, in their order (an
+    encounter draws its geometry; a fixed aircraft draws nothing)."""
     R = c.route_start.shape[0]
     B = R * c.C + c.x_pos.shape[0]
     for b in range(B):
@@ -275,6 +384,9 @@ def _populate_traffic(e, rs, s, c):
             s.active[e, slot] = arc < c.route_len[r]
     for i in range(c.x_pos.shape[0]):
         b = R * c.C + i
+        if c.x_enc[i, X_HAS] != 0.0:
+            _place_encounter(e, rs, s, c, i, b)
+            continue
         s.pos[e, b, 0] = c.x_pos[i, 0]
         s.pos[e, b, 1] = c.x_pos[i, 1]
         s.vel[e, b, 0] = c.x_dir[i, 0] * c.x_speed[i]
@@ -343,6 +455,15 @@ def _place_controlled(e, rs, s, c, B):
         s.ac_speed[e, 0] = c.own_fixed[O_SPEED]
         s.level[e, B] = int(c.own_fixed[O_LEVEL])
         s.ac_goal[e, 0, 0], s.ac_goal[e, 0, 1] = c.own_fixed[O_GOAL_X], c.own_fixed[O_GOAL_Y]
+        # An encounter drawn within the start clearance at the ownship's level: draw again.
+        X = c.x_pos.shape[0]
+        for i in range(X):
+            b = B - X + i
+            if c.x_enc[i, X_HAS] != 0.0 and s.level[e, b] == s.level[e, B]:
+                dx = s.pos[e, b, 0] - c.own_fixed[O_X]
+                dy = s.pos[e, b, 1] - c.own_fixed[O_Y]
+                if math.sqrt(dx * dx + dy * dy) < clearance:
+                    return False
         return True
 
     size = c.fp[P_SIZE]

@@ -45,3 +45,34 @@ def test_render_gif(tmp_path):
     assert not list(tmp_path.glob(".*tmp"))
     r = cli("render", "low", "--out", str(tmp_path / "x.png"))
     assert r.returncode == 2 and ".gif" in r.stderr
+
+
+def test_scenarios_certify(tmp_path):
+    """docs/model.md §8.3: a family passes (exit 0) and its JSON report holds the three parts;
+    an encounter that holding survives fails (exit 1); a missing agent is a user error."""
+    import json
+    from pathlib import Path
+
+    mvp = Path(__file__).resolve().parents[2] / "agents" / "mvp"
+    out = tmp_path / "cert.json"
+    r = cli(
+        "scenarios", "certify", "tactical/crossing", "--episodes", "60", "--search-episodes",
+        "4", "--enough", "2", "--agent", str(mvp), "--out", str(out),
+    )  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    last = r.stdout.rstrip().splitlines()[-1]
+    assert "(a) holding fails in 60 / 60" in r.stdout and last.startswith("certified")
+    rep = json.loads(out.read_text())
+    assert rep["ok"] and rep["hold"]["failures"] == 60 and rep["agent"]["episodes"] == 60
+    assert len(rep["families"]["per_episode"]) == 4
+    assert all(len(e["families"]) >= 2 for e in rep["families"]["per_episode"])
+
+    easy = tmp_path / "easy.yaml"
+    easy.write_text("extends: tactical/head-on\nid: easy\naircraft: []\n")
+    r = cli("scenarios", "certify", str(easy), "--episodes", "5", "--search-episodes", "1",
+            "--agent", "none")  # fmt: skip
+    assert r.returncode == 1 and "FAIL (a) holding fails in 0 / 5" in r.stdout
+    assert "NOT certified" in r.stdout
+
+    r = cli("scenarios", "certify", "tactical/crossing", "--agent", str(tmp_path / "nope"))
+    assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr

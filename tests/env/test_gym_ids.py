@@ -26,11 +26,12 @@ def test_id_matches_its_scenario(task_id: str, kwargs: dict, steps: int) -> None
     cfg = load_scenario(kwargs["scenario"])
     assert steps == cfg.time.max_steps
     spec = gymnasium.spec(task_id)
-    assert spec.max_episode_steps == cfg.time.max_steps and task_id.endswith("-v0")
+    assert spec.max_episode_steps == cfg.time.max_steps
+    assert task_id.endswith(f"-v{cfg.version - 3}"), "an id's version follows its scenario's"
 
 
 def test_make_and_make_vec_run_an_id() -> None:
-    env = gymnasium.make("cdr_bench/HeadOn-v0")
+    env = gymnasium.make("cdr_bench/HeadOn-v1")
     obs, _ = env.reset(seed=0)
     assert env.unwrapped.par_env.config.id == "tactical/head-on" and obs.shape == (42,)
     envs = gymnasium.make_vec(
@@ -40,6 +41,13 @@ def test_make_and_make_vec_run_an_id() -> None:
     assert obs.shape == (4, 42) and info["action_mask"].shape == (4, 27)
     obs, *_ = envs.step(np.full(4, 13))
     assert obs.shape == (4, 42)
+
+
+def test_version_0_of_a_tactical_id_is_still_the_fixed_encounter() -> None:
+    for name in ("HeadOn", "Crossing", "Overtaking"):
+        fixed = gymnasium.spec(f"cdr_bench/{name}Fixed-v0").kwargs["scenario"]
+        assert gymnasium.spec(f"cdr_bench/{name}-v0").kwargs["scenario"] == fixed
+        assert fixed.endswith("-fixed") and load_scenario(fixed).version == 3
 
 
 def test_pprint_registry_shows_the_ids() -> None:

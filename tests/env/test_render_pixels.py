@@ -1,6 +1,6 @@
-"""What a reader of a rendered frame sees, checked on its pixels (tactical/head-on): the ownship
-is marked and identifiable, the legend shows every colour used, the encounter fills the frame,
-and the outcome appears once the episode has ended."""
+"""What a reader of a rendered frame sees, checked on its pixels (tactical/head-on-fixed): the
+ownship is marked and identifiable, the legend shows every colour used, the encounter fills the
+frame, and the outcome appears once the episode has ended."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from cdr_bench import render
 from cdr_bench.actions import HOLD
 from cdr_bench.sim import OUTCOME_NAMES
 
-# A LoS ends head-on's episode at step 2 when every aircraft holds.
-SCENARIO = "tactical/head-on"
+# A LoS ends head-on-fixed's episode at step 2 when every aircraft holds.
+SCENARIO = "tactical/head-on-fixed"
 
 
 def _mask(frame: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
@@ -149,6 +149,19 @@ def test_whole_sector_without_an_explicit_encounter():
     assert render.encounter_box(cdr_bench.parallel_env(SCENARIO).config) is not None
     frame = env.render()
     assert frame.shape == (render.SIZE_PX, render.SIZE_PX, 3)
+
+
+def test_a_drawn_encounter_is_in_view():
+    """A family draws its aircraft per episode: the view fits every start it can draw."""
+    env = cdr_bench.parallel_env("tactical/head-on", render_mode="rgb_array")
+    for seed in range(5):
+        env.reset(seed=seed)
+        view = render.frame_view(env.sim)
+        assert view.zoomed
+        for pos in env.sim.bg_pos_km[0]:
+            x, y = view.px(pos)
+            assert render.MAP_BOX[0] <= x < render.MAP_BOX[2]
+            assert render.MAP_BOX[1] <= y < render.MAP_BOX[3]
 
 
 def test_env_render_zoom_attribute():
