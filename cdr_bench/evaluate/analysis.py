@@ -1,5 +1,6 @@
 """Analysis that works on any agent: the distribution of its first actions on a scenario
-(multimodality, the paper's Fig. 9) and its decision latency. Subcommands ``multimodal`` and
+(multimodality, the paper's Fig. 9, and the manoeuvre families its successful samples reach per
+episode, docs/model.md §10.4) and its decision latency. Subcommands ``multimodal`` and
 ``latency`` (registered by cdr_bench.cli)."""
 
 from __future__ import annotations
@@ -20,18 +21,39 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate.cli import add_agent_args, agent_options
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
 from cdr_bench.evaluate.results import atomic_write_text
-from cdr_bench.evaluate.runner import close_all, fault_message, load_for
-from cdr_bench.scenarios import load_scenario
+from cdr_bench.evaluate.runner import batch_seed, close_all, fault_message, load_for
+from cdr_bench.evaluate.search import FAMILIES, FAMILY_ACTIONS, search_families
+from cdr_bench.evaluate.seeds import episode_seeds
+from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim.core import SUCCESS
 from cdr_bench.vector_env import VectorEnv
 
 
 def register(sub: Any) -> None:
-    mm = sub.add_parser("multimodal", help="distribution of successful first actions (§5.4)")
+    mm = sub.add_parser(
+        "multimodal",
+        help="distribution of successful first actions and manoeuvre families per episode (§5.4)",
+    )
     mm.add_argument("agent", help="agent directory or agent.py")
     mm.add_argument("--scenario", default="tactical/head-on")
-    mm.add_argument("--samples", type=int, default=1000)
-    mm.add_argument("--seed", type=int, default=0)
+    mm.add_argument(
+        "--episodes",
+        type=int,
+        default=DEFAULT_EPISODES,
+        help=f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
+    )
+    mm.add_argument(
+        "--samples",
+        type=int,
+        default=DEFAULT_SAMPLES,
+        help=f"samples per episode ({DEFAULT_SAMPLES})",
+    )
+    mm.add_argument("--seed", type=int, default=0, help="base seed of the episodes (as evaluate)")
+    mm.add_argument(
+        "--search",
+        action="store_true",
+        help="also search each episode's feasible manoeuvre families (docs/model.md §8.3)",
+    )
     mm.add_argument(
         "--max-steps",
         type=int,
@@ -80,43 +102,108 @@ def _check_scenario(name: str) -> None:
         raise UserError(f"scenario {name!r}: {e}") from None
 
 
-def first_action_distribution(
-    agent: RemoteAgent, scenario: str, samples: int, seed: int = 0, max_steps: int = 0
-) -> dict[str, Any]:
-    """Sample the first action ``samples`` times from the scenario's start (one batched call, so
-    every row draws its own noise), then validate each by a follow-on rollout with the same
-    agent. Returns counts per first action of all samples and of successful ones.
+DEFAULT_EPISODES = 20
+"""Episodes of ``cdr-bench multimodal`` (the evaluation's first ones)."""
+DEFAULT_SAMPLES = 50
+"""Samples of the first action per episode."""
+MAX_ROWS = 1024
+"""Most rollouts of one agent call: episodes are sampled in chunks of ``MAX_ROWS // samples``."""
 
-    Every sample is an episode of the same seed in one :class:`VectorEnv`; learning intruders,
-    if any, hold."""
-    env = VectorEnv(scenario, num_envs=samples)
-    obs, masks = env.reset(seeds=np.full(samples, seed))
-    try:
-        agent.reset(seed)
-    except AgentFault as f:
-        raise UserError(fault_message(f, agent, f"reset(seed) on {scenario!r}")) from None
-    first = None
-    t = 0
-    act = np.full((samples, env.n_agents), HOLD, dtype=np.int64)
-    flying = env.flying[:, 0]
-    while flying.any() and not (max_steps and t >= max_steps):
-        t += 1
-        act[:, 0] = HOLD
+
+def first_action_distribution(
+    agent: RemoteAgent,
+    scenario: str | ScenarioConfig,
+    samples: int,
+    seed: int = 0,
+    max_steps: int = 0,
+    episodes: int = 1,
+) -> dict[str, Any]:
+    """Sample the first action ``samples`` times in each of the first ``episodes`` episodes of
+    the evaluation (base seed ``seed``: :func:`~cdr_bench.evaluate.seeds.episode_seeds`), then
+    validate each by a follow-on rollout with the same agent.
+
+    The copies of an episode differ only by the agent's own randomness: all rows of a chunk of
+    episodes go through one batched call per step, so every row draws its own noise; the agent
+    is reset before each chunk (``MAX_ROWS // samples`` episodes) with the seed the evaluator
+    gives batch ``chunk``. Learning intruders, if any, hold.
+
+    Returns:
+        ``all`` and ``success`` (27 counts of first actions over every sample, and over the
+        samples whose episode succeeded), ``success_rate``, and ``per_episode``: for each episode
+        its seed, ``all``, ``success``, ``success_rate``, ``family_successes`` (per manoeuvre
+        family, docs/model.md §8.3, the successful samples whose first manoeuvre, i.e. first
+        action other than hold, is of that family) and ``families`` (those with at least one).
+    """
+    config = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    chash = config.config_hash()
+    seeds = episode_seeds(seed, config.id, chash, 0, episodes)
+    per_chunk = max(1, MAX_ROWS // samples)
+    per_episode = []
+    for chunk, lo in enumerate(range(0, episodes, per_chunk)):
+        chunk_seeds = seeds[lo : lo + per_chunk]
+        n = len(chunk_seeds) * samples
+        env = VectorEnv(config, num_envs=n)
+        obs, masks = env.reset(seeds=np.repeat(np.asarray(chunk_seeds, dtype=np.uint64), samples))
         try:
-            act[flying, 0] = agent.act_batch(obs[flying, 0], masks[flying, 0])
+            agent.reset(batch_seed(seed, config.id, chash, chunk))
         except AgentFault as f:
-            raise UserError(fault_message(f, agent, f"{scenario!r}, step {t}")) from None
-        if first is None:
-            first = act[:, 0].copy()
-        out = env.step(act)
-        obs, masks = out.obs, out.action_mask
+            raise UserError(fault_message(f, agent, f"reset(seed) on {config.id!r}")) from None
+        first = None
+        move = np.full(n, HOLD, dtype=np.int64)  # the first action other than hold
+        t = 0
+        act = np.full((n, env.n_agents), HOLD, dtype=np.int64)
         flying = env.flying[:, 0]
-    ok = env.sim.ac_outcome[:, 0] == SUCCESS
-    assert first is not None, "the scenario ended before the first decision"
+        while flying.any() and not (max_steps and t >= max_steps):
+            t += 1
+            act[:, 0] = HOLD
+            try:
+                act[flying, 0] = agent.act_batch(obs[flying, 0], masks[flying, 0])
+            except AgentFault as f:
+                raise UserError(fault_message(f, agent, f"{config.id!r}, step {t}")) from None
+            if first is None:
+                first = act[:, 0].copy()
+            move = np.where(move == HOLD, act[:, 0], move)
+            out = env.step(act)
+            obs, masks = out.obs, out.action_mask
+            flying = env.flying[:, 0]
+        assert first is not None, "the scenario ended before the first decision"
+        ok = env.sim.ac_outcome[:, 0] == SUCCESS
+        for i, episode_seed in enumerate(chunk_seeds):
+            rows = slice(i * samples, (i + 1) * samples)
+            sampled, won = first[rows], ok[rows]
+            success = np.bincount(sampled[won], minlength=27)
+            moves = np.bincount(move[rows][won], minlength=27)
+            per_family = {f: int(sum(moves[a] for a in FAMILY_ACTIONS[f])) for f in FAMILIES}
+            per_episode.append(
+                {
+                    "episode": lo + i,
+                    "seed": int(episode_seed),
+                    "all": np.bincount(sampled, minlength=27).tolist(),
+                    "success": success.tolist(),
+                    "success_rate": float(won.mean()),
+                    "family_successes": per_family,
+                    "families": [f for f in FAMILIES if per_family[f]],
+                }
+            )
+    total_all = np.sum([e["all"] for e in per_episode], axis=0, dtype=np.int64)
+    total_success = np.sum([e["success"] for e in per_episode], axis=0, dtype=np.int64)
     return {
-        "all": np.bincount(first, minlength=27).tolist(),
-        "success": np.bincount(first[ok], minlength=27).tolist(),
-        "success_rate": float(ok.mean()),
+        "all": total_all.tolist(),
+        "success": total_success.tolist(),
+        "success_rate": float(total_success.sum() / max(total_all.sum(), 1)),
+        "per_episode": per_episode,
+    }
+
+
+def family_summary(per_episode: list[dict[str, Any]]) -> dict[str, Any]:
+    """How many distinct manoeuvre families each episode's successful samples reach: the list,
+    its distribution (0..5), its mean, and per family the episodes that reach it."""
+    counts = [len(e["families"]) for e in per_episode]
+    return {
+        "families_per_episode": counts,
+        "families_distribution": {str(k): counts.count(k) for k in range(len(FAMILIES) + 1)},
+        "families_mean": float(np.mean(counts)) if counts else 0.0,
+        "family_episodes": {f: sum(f in e["families"] for e in per_episode) for f in FAMILIES},
     }
 
 
@@ -203,33 +290,52 @@ def multimodal(
     max_steps: int = 0,
     threshold: float = 0.05,
     out: str | os.PathLike[str] | None = None,
+    episodes: int = 1,
+    search: bool = False,
 ) -> dict[str, Any]:
-    """First-action distribution, its modes and (with ``out``) the JSON and heat map files."""
-    if samples < 1:
-        raise UserError("--samples must be >= 1")
+    """First-action distribution over ``episodes`` episodes (``samples`` each), its modes, the
+    manoeuvre families each episode's successful samples reach (with ``search``, beside those
+    the search finds, docs/model.md §8.3) and (with ``out``) the JSON and heat map files.
+
+    ``episodes`` is 1 by default here, so that a caller of the single-episode analysis of
+    earlier versions keeps its cost (``samples`` rollouts); the command's default is
+    :data:`DEFAULT_EPISODES` episodes of :data:`DEFAULT_SAMPLES` samples."""
+    if samples < 1 or episodes < 1:
+        raise UserError("--samples and --episodes must be >= 1")
     _check_scenario(scenario)
+    config = load_scenario(scenario)
     try:
         agent = _load(agent_path, scenario, options)
-        d = first_action_distribution(agent, scenario, samples, seed, max_steps)
+        d = first_action_distribution(agent, config, samples, seed, max_steps, episodes)
     finally:
         close_all()
     summ = mode_summary(d["success"], threshold)
+    fam = family_summary(d["per_episode"])
     res = {
         "agent": str(agent_path),
         "scenario": scenario,
         "samples": samples,
+        "episodes": episodes,
         "seed": seed,
         "threshold": threshold,
-        **d,
+        **{k: d[k] for k in ("all", "success", "success_rate")},
         **summ,
+        **fam,
+        "per_episode": d["per_episode"],
     }
+    if search:
+        found = search_families(config, [e["seed"] for e in d["per_episode"]])
+        for e, r in zip(res["per_episode"], found, strict=True):
+            e["feasible_families"] = r.families
+        res["feasible_families_mean"] = float(np.mean([len(r.families) for r in found]))
     if out is not None:
         o = Path(out)
         # PNG first, JSON last: a JSON file means the run finished and its picture is there.
         heatmap(
             d["success"],
-            f"{Path(str(agent_path)).name} on {scenario}: {samples} samples, "
-            f"follow-on success {100 * d['success_rate']:.1f} %",
+            f"{Path(str(agent_path)).name} on {scenario}: {episodes} episode(s) x {samples} "
+            f"samples, follow-on success {100 * d['success_rate']:.1f} %, "
+            f"{fam['families_mean']:.2f} families per episode",
             o.with_suffix(".png"),
             all_counts=d["all"],
         )
@@ -240,13 +346,37 @@ def multimodal(
 def cmd_multimodal(ns: argparse.Namespace) -> int:
     options = agent_options(ns, ns.agent)
     res = multimodal(
-        ns.agent, ns.scenario, ns.samples, ns.seed, options, ns.max_steps, ns.threshold, ns.out
+        ns.agent,
+        ns.scenario,
+        ns.samples,
+        ns.seed,
+        options,
+        ns.max_steps,
+        ns.threshold,
+        ns.out,
+        episodes=ns.episodes,
+        search=ns.search,
     )
     print(
-        f"{ns.scenario}: {ns.samples} samples, follow-on success {res['success_rate']:.3f}, "
-        f"{res['modes']} mode(s) >= {ns.threshold:.0%}, normalised entropy "
-        f"{res['normalised_entropy']:.3f}"
+        f"{ns.scenario}: {ns.episodes} episode(s) x {ns.samples} samples, follow-on success "
+        f"{res['success_rate']:.3f}, {res['modes']} mode(s) >= {ns.threshold:.0%}, normalised "
+        f"entropy {res['normalised_entropy']:.3f}"
     )
+    dist = ", ".join(f"{k}: {v}" for k, v in res["families_distribution"].items() if v)
+    per_family = ", ".join(f"{f} {n}" for f, n in res["family_episodes"].items())
+    print(
+        f"manoeuvre families reached per episode: mean {res['families_mean']:.2f} "
+        f"(episodes with 0..5: {dist}); episodes reaching each: {per_family}"
+    )
+    if "feasible_families_mean" in res:
+        print(f"  found by the search: mean {res['feasible_families_mean']:.2f} per episode")
+    for e in res["per_episode"]:
+        feasible = e.get("feasible_families")
+        extra = "" if feasible is None else f" (search: {', '.join(feasible) or '-'})"
+        print(
+            f"  episode {e['episode']:3d}: success {e['success_rate']:.2f}, families "
+            f"{', '.join(e['families']) or '-'}{extra}"
+        )
     for a in np.flatnonzero(res["all"]):
         print(
             f"  action {a:2d} {decode(int(a))}: sampled {res['all'][a]:5d}, "
