@@ -178,15 +178,18 @@ def inline_md(s: str) -> str:
     return "".join(bits)
 
 
-def html_table(tid: str, head: Sequence[str], rows: Rows, cls: str = "") -> str:
-    """A sortable HTML table (``data-sort`` keys; the page's script sorts on click)."""
+def html_table(
+    tid: str, head: Sequence[str], rows: Rows, cls: str = "", groups: Sequence[str] | None = None
+) -> str:
+    """A sortable HTML table (``data-sort`` keys; the page's script sorts on click); ``groups``:
+    one per row, written as the row's ``data-group`` (the page's filter hides groups)."""
     out = [
         '<div class="scroll">',
         f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">',
     ]
     out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in head) + "</tr></thead>")
     out.append("<tbody>")
-    for r in rows:
+    for i, r in enumerate(rows):
         tds = []
         for c in r:
             attrs = ""
@@ -196,7 +199,8 @@ def html_table(tid: str, head: Sequence[str], rows: Rows, cls: str = "") -> str:
                 attrs += ' class="best"'
             mark = f'<span class="mark">{c.mark}</span>' if c.mark else ""
             tds.append(f"<td{attrs}>{inline_md(c.text)}{mark}</td>")
-        out.append("<tr>" + "".join(tds) + "</tr>")
+        tr = "<tr>" if groups is None else f'<tr data-group="{_esc(groups[i])}">'
+        out.append(tr + "".join(tds) + "</tr>")
     out.append("</tbody></table></div>")
     return "\n".join(out)
 
@@ -207,8 +211,115 @@ def html_table(tid: str, head: Sequence[str], rows: Rows, cls: str = "") -> str:
 HIGHER, LOWER = "▲", "▼"
 
 
+def fmt_diff(kind: str, d: dict[str, Any] | None) -> str:
+    """A paired difference ``{diff, ci95, significant}``: points (pp) for rates, with its 95 %
+    interval; ``▲``/``▼`` when significant."""
+    if d is None or d.get("diff") is None:
+        return "-"
+    scale, unit = (100.0, " pp") if kind == "rate" else (1.0, "")
+
+    def f(x: float) -> str:
+        return f"{round(scale * x, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
+
+    lo, hi = d["ci95"]
+    ci = "" if lo is None or hi is None else f" [{f(lo)}, {f(hi)}]"
+    mark = (f" {HIGHER}" if d["diff"] > 0 else f" {LOWER}") if d["significant"] else ""
+    return f"{f(d['diff'])}{unit}{ci}{mark}"
+
+
+def fmt_budget(b: dict[str, Any] | None) -> tuple[str, str]:
+    """Training transitions and seeds of an entry (``-`` for a scripted or undeclared one)."""
+    if not b or b.get("transitions") is None:
+        return "-", "-"
+    t = b["transitions"]
+    text = f"{t:,}" if isinstance(t, int) else f"{t[0]:,}-{t[1]:,}"
+    return text + (" (declared)" if b.get("source") == "declared" else ""), str(b["seeds"])
+
+
+def _transitions(b: dict[str, Any] | None) -> int | None:
+    t = (b or {}).get("transitions")
+    return t if isinstance(t, int) or t is None else t[0]
+
+
+_KIND = {c.key: c.kind for c in COLUMNS}
+_HEADER = {c.key: c.header for c in COLUMNS}
+
+
+def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
+    """The headline ranking (``data["ranking"]``): rank, entry, group, the headline score with
+    its interval, the paired gap to the row above, the tie-break, the paper's five metrics on
+    the headline scenario, and the training budget. Returns (header, rows, group per row)."""
+    rk = data["ranking"]
+    ent = {e["name"]: e for e in data["entries"]}
+    five = list(rk["rows"][0]["metrics"]) if rk["rows"] else []
+    head = [
+        "#",
+        "entry",
+        "group",
+        f"{_HEADER[rk['metric']]} ({rk['scenario']})",
+        "vs row above",
+        _HEADER[rk["tie_break"]],
+        *[_HEADER[k] for k in five],
+        "training transitions",
+        "seeds",
+    ]
+    rows: Rows = []
+    for r in rk["rows"]:
+        e = ent[r["entry"]]
+        tied = " (tied with #1)" if r["tied_with_leader"] and r["rank"] > 1 else ""
+        budget, seeds = fmt_budget(e["budget"])
+        h, tb = r["headline"], r["tie_break"]
+        rows.append(
+            [
+                Cell(f"{r['rank']}{tied}", r["rank"]),
+                Cell(e["display_name"], e["display_name"]),
+                Cell(e["group"], e["group"]),
+                Cell(fmt_metric("rate", h), h["value"], r["rank"] == 1),
+                Cell(fmt_diff("rate", r["vs_above"]), (r["vs_above"] or {}).get("diff")),
+                Cell(fmt_metric("mean", tb), tb["value"]),
+            ]
+            + [
+                Cell(fmt_value(_KIND[k], r["metrics"][k]["value"]), r["metrics"][k]["value"])
+                for k in five
+            ]
+            + [
+                Cell(budget, _transitions(e["budget"])),
+                Cell(seeds, None if seeds == "-" else int(seeds)),
+            ]
+        )
+    return head, rows, [ent[r["entry"]]["group"] for r in rk["rows"]]
+
+
+def tactical_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
+    """Success per tactical scenario, entries in ranking order: a family's success rate with
+    its 95 % interval, a fixed encounter's single outcome (``data["tactical"]``)."""
+    ent = {e["name"]: e for e in data["entries"]}
+    tac = data["tactical"]
+    head = ["#", "entry"] + [
+        f"{t['scenario']} ({'fixed' if t['fixed'] else 'family'})" for t in tac
+    ]
+    rows: Rows = []
+    groups = []
+    for r in data["ranking"]["rows"]:
+        row = [Cell(str(r["rank"]), r["rank"]), Cell(ent[r["entry"]]["display_name"])]
+        for t in tac:
+            c = t["cells"].get(r["entry"])
+            if c is None:
+                row.append(Cell("-"))
+            elif c["kind"] == "rate":
+                row.append(Cell(fmt_metric("rate", c), c["value"]))
+            else:
+                row.append(Cell(c["text"], c["text"]))
+        rows.append(row)
+        groups.append(ent[r["entry"]]["group"])
+    return head, rows, groups
+
+
 def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[str], Rows]:
+    """One scenario, entries in ranking order; a fixed encounter (every episode the same
+    start) without intervals."""
     names = {e["name"]: e["display_name"] for e in data["entries"]}
+    ci = not table.get("fixed", False)
     head = ["#", "entry"] + [c.header for c in MAIN_COLUMNS] + [LATENCY_HEADER]
     rows = []
     for r in table["rows"]:
@@ -224,7 +335,9 @@ def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[st
             if isinstance(vs, dict) and vs["significant"]:
                 mark = HIGHER if vs["direction"] == "higher" else LOWER
             row.append(
-                Cell(fmt_metric(c.kind, m), m["value"], r["entry"] in table["best"][c.key], mark)
+                Cell(
+                    fmt_metric(c.kind, m, ci), m["value"], r["entry"] in table["best"][c.key], mark
+                )
             )
         lat = r["latency_ms"]
         row.append(Cell(fmt_latency(lat), lat["median"], r["entry"] in table["best"]["latency_ms"]))
@@ -232,23 +345,43 @@ def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[st
     return head, rows
 
 
-def entries_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
-    head = ["entry", "what", "agent", "checkpoint", "authors", "reference", "training", "sha256"]
+def entries_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
+    """Every entry, by group (``data["groups"]`` order), then as submitted. Returns (header,
+    rows, group per row)."""
+    head = [
+        "entry",
+        "group",
+        "what",
+        "agent",
+        "checkpoint",
+        "authors",
+        "reference",
+        "training",
+        "training transitions",
+        "seeds",
+        "sha256",
+    ]
+    order = {g: i for i, g in enumerate(data.get("groups", []))}
+    entries = sorted(data["entries"], key=lambda e: order.get(e.get("group"), len(order)))
     rows = []
-    for e in data["entries"]:
+    for e in entries:
+        budget, seeds = fmt_budget(e.get("budget"))
         rows.append(
             [
                 Cell(e["display_name"], e["display_name"]),
+                Cell(e.get("group", "-")),
                 Cell(e["description"]),
                 Cell(f"`{e['agent']}`"),
                 Cell(f"`{e['checkpoint']}`" if e["checkpoint"] else "-"),
                 Cell(", ".join(e["authors"])),
                 Cell(e["reference"]),
                 Cell(f"`{e['training']}`" if e["training"] else "scripted (no training)"),
+                Cell(budget),
+                Cell(seeds),
                 Cell(f"`{e['agent_sha256'][:12]}`"),
             ]
         )
-    return head, rows
+    return head, rows, [e.get("group", "") for e in entries]
 
 
 def published_table(

@@ -1,9 +1,11 @@
 """``cdr-bench leaderboard build [--evaluate [NAME ...]] [--check]``.
 
 * ``build``: render ``README.md``, ``index.html``, ``leaderboard.json`` and ``plots/*.png`` from
-  the submissions and the result files in ``results/`` (nothing is evaluated).
-* ``build --evaluate``: first evaluate (and map the first-action distribution where a
-  submission asks) every submission (or the named ones), then render. Each submission is scored
+  the submissions, the result files in ``results/`` and the training logs the submissions name
+  (nothing is evaluated).
+* ``build --evaluate``: first evaluate (and map the first-action distribution and record the
+  replayed episodes where a submission asks) every submission (or the named ones), then
+  render. Each submission is scored
   by a trusted child process (:mod:`.entry`: simulator, runner, result files) while its agent
   runs in another process confined by bubblewrap (:mod:`cdr_bench.evaluate.sandbox`: read-only
   view of the repository with this folder hidden, private scratch, no network, own PID
@@ -67,7 +69,9 @@ from cdr_bench.leaderboard.data import (
     current_identity,
     load_entries,
     load_multimodal,
+    load_replays,
     multimodal_path,
+    replays_path,
     result_path,
 )
 from cdr_bench.leaderboard.published import load_published
@@ -76,6 +80,8 @@ from cdr_bench.leaderboard.submission import Submission, load_submissions
 PAPER_EPISODES = 1000
 BASE_SEED = 0
 MULTIMODAL_SAMPLES = 1000
+REPLAY_EPISODES = 3
+"""Episodes recorded per replayed scenario (the first ones of the evaluation)."""
 PAGES = ("README.md", "index.html", "leaderboard.json")
 _MPL_META = re.compile(r'<meta name="generator" content="[^"]*; plots: matplotlib ([^"]+)">')
 _DATA_URI = re.compile(r'src="data:image/png;base64,[A-Za-z0-9+/=]+"')
@@ -113,7 +119,13 @@ def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, byt
     plots = render_plots(data)
     files: dict[str, bytes] = {
         "README.md": render_markdown(data, published, list(plots)).encode(),
-        "index.html": render_html(data, published, plots, matplotlib_version()).encode(),
+        "index.html": render_html(
+            data,
+            published,
+            plots,
+            matplotlib_version(),
+            {e.name: e.replays for e in entries if e.replays is not None},
+        ).encode(),
         "leaderboard.json": (json.dumps(data, indent=1, ensure_ascii=False) + "\n").encode(),
     }
     files.update({f"plots/{k}": v for k, v in plots.items()})
@@ -239,6 +251,7 @@ def evaluate_submission(
         }
         for sc in sub.multimodality
     ]
+    replays = (scratch / "replays.json").resolve()
     spec = {
         "agent": sub.agent,
         "scenarios": [] if sub.suite else list(sub.scenarios),
@@ -253,6 +266,11 @@ def evaluate_submission(
         "limits": {"cpu_s": limits.cpu_s, "memory_mb": limits.memory_mb, "wall_s": limits.wall_s},
         "multimodality": mm,
         "samples": MULTIMODAL_SAMPLES,
+        "replays": {
+            "scenarios": list(sub.replays),
+            "episodes": REPLAY_EPISODES,
+            "out": str(replays),
+        },
     }
     spec_file = scratch / "spec.json"
     spec_file.parent.mkdir(parents=True, exist_ok=True)
@@ -278,6 +296,9 @@ def evaluate_submission(
     for m in mm:
         load_multimodal(Path(m["out"]))  # refuses garbage
         shutil.copyfile(m["out"], multimodal_path(out_dir, sub.name, m["scenario"]))
+    if sub.replays:
+        load_replays(replays, sub)  # refuses garbage
+        shutil.copyfile(replays, replays_path(out_dir, sub.name))
     return wall
 
 
@@ -650,6 +671,18 @@ def _check(
                             f"results/{a_p.name}",
                             json.dumps(a, indent=1, sort_keys=True),
                             json.dumps(b, indent=1, sort_keys=True),
+                        )
+                    )
+            if sub.replays:
+                a_p, b_p = replays_path(results_dir, sub.name), replays_path(fresh, sub.name)
+                if not a_p.exists():
+                    diffs.append(f"results/{a_p.name}: missing from the committed leaderboard")
+                elif a_p.read_bytes() != b_p.read_bytes():
+                    diffs.append(
+                        _diff_text(
+                            f"results/{a_p.name}",
+                            json.dumps(load_replays(a_p, sub), indent=1, sort_keys=True),
+                            json.dumps(load_replays(b_p, sub), indent=1, sort_keys=True),
                         )
                     )
         try:

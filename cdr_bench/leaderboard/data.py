@@ -1,10 +1,34 @@
 """From result files to the leaderboard's numbers (``leaderboard.json``): a pure function of the
-submissions, the result files and the published tables.
+submissions, the result files, the training logs they name and the published tables.
 
 Every entry must have been run on identical episodes (same scenario config hash, episode count
-and seeds); the per-episode file must reproduce the metrics of the result JSON; differences from
-the reference entry are the evaluator's paired bootstrap
-(:func:`cdr_bench.evaluate.compare.compare`).
+and seeds); the per-episode file must reproduce the metrics of the result JSON; every paired
+difference is the evaluator's paired bootstrap (:func:`cdr_bench.evaluate.compare.compare`).
+
+**The headline score** (:data:`HEADLINE_METRIC` on :data:`HEADLINE_SCENARIO`): the ownship's
+clean success rate on ``high``, goal reached with no loss of separation at all, with its 95 %
+Wilson interval. Success alone does not separate agents (on ``high`` the never-manoeuvring
+``direct`` agent reaches its goal in 99 % of the episodes, the learned agents in 99.5-99.8 %):
+an agent that flies through a LoS still succeeds. Clean success counts the episodes an
+air-traffic controller would accept, rewards resolving rather than luck, and cannot be gamed
+by failing (a timeout, a boundary exit or an NMAC is not a clean success). Entries are ranked
+by it: the entries with the top score and every entry whose paired difference from one of
+them is not significant (95 % paired bootstrap interval contains 0) are statistically tied and
+ordered by :data:`TIE_BREAK` (extra path flown by successful flights, lower first: among
+agents that succeed equally often, the one that detours less), except that an entry never
+ranks above a tied one whose score is significantly higher; the first of them is the
+leader. Every other entry is significantly below the top score; they follow by headline score,
+each row with the paired difference from the row above.
+
+**Best values** are marked only on metrics whose better value cannot come from failing
+(:data:`MARK_BEST`): never on steps, extra path, delay or manoeuvres (an agent that ends early
+by a LoS or succeeds only on easy episodes has fewer steps), nor on the timeout rate or the
+rewards (shaped, and lower timeouts come with LoS endings).
+
+**Fixed encounters**: a scenario whose episodes all start from the identical state (every state
+array of the simulator equal across the episodes' seeds; :func:`fixed_geometry`) is one
+encounter flown many times; its result is shown as the single outcome (``success``, ``LoS at
+step 7``), never as a rate with an interval.
 """
 
 from __future__ import annotations
@@ -22,14 +46,28 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate.compare import compare
 from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
-from cdr_bench.evaluate.report import DENSITIES, MAIN_COLUMNS
+from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
 from cdr_bench.evaluate.results import read_episodes, read_result
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
-from cdr_bench.leaderboard.submission import Submission
-from cdr_bench.leaderboard.tables import multimodal_path, result_path
+from cdr_bench.leaderboard.submission import GROUPS, Submission
+from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
-DATA_VERSION = 1
+DATA_VERSION = 2
+HEADLINE_SCENARIO = "high"
+HEADLINE_METRIC = "clean_success_rate"
+TIE_BREAK = "extra_path_km"
+"""Lower is better; breaks ties among the entries statistically tied with the leader."""
+PAPER_FIVE = ("success_rate", "los_rate", "nmac_rate", "timeout_rate", "avg_steps_success")
+MARK_BEST = frozenset(
+    {"success_rate", "clean_success_rate", "los_rate", "nmac_rate", "invalid_action_rate"}
+    | {"latency_ms"}
+)
+"""Columns whose best value is marked: safety and headline metrics (a better value cannot come
+from failing), the share of masked actions and the decision latency."""
+BASELINE = "mvp"
+"""The scripted resolver the learned agents are compared with in the conclusion."""
+TACTICAL_PREFIX = "tactical/"
 
 
 @contextmanager
@@ -65,6 +103,13 @@ class Entry:
     path: Path
     result: dict[str, Any]
     multimodal: dict[str, dict[str, Any]] = field(default_factory=dict)
+    episodes: list[dict[str, Any]] = field(default_factory=list)
+    """The per-episode records (all scenarios, in file order)."""
+    replays: dict[str, Any] | None = None
+
+    @property
+    def name(self) -> str:
+        return self.sub.name
 
     def scenario(self, sid: str) -> dict[str, Any] | None:
         for s in self.result["scenarios"]:
@@ -73,9 +118,10 @@ class Entry:
         return None
 
 
-def check_result(sub: Submission, path: Path) -> dict[str, Any]:
+def check_result(sub: Submission, path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Read a submission's result file and check it against the submission and its own
-    per-episode file; :class:`UserError` naming the file otherwise."""
+    per-episode file; :class:`UserError` naming the file otherwise. Returns the result and its
+    per-episode records."""
     try:
         result = read_result(path)
         episodes = read_episodes(path, result)
@@ -101,7 +147,7 @@ def check_result(sub: Submission, path: Path) -> dict[str, Any]:
                 f"{path}: {s['id']}: the metrics do not match the per-episode file "
                 f"{result['episodes_file']} (edited by hand?)"
             )
-    return result
+    return result, episodes
 
 
 def canonical_json(obj: Any) -> str:
@@ -133,7 +179,15 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
                 f"{p}: no result file for submission {sub.name}; run "
                 f"`cdr-bench leaderboard build --evaluate {sub.name}`"
             )
-        e = Entry(sub, p, check_result(sub, p))
+        result, episodes = check_result(sub, p)
+        e = Entry(sub, p, result, episodes=episodes)
+        if sub.replays:
+            rp = replays_path(results_dir, sub.name)
+            if not rp.exists():
+                raise UserError(
+                    f"{rp}: missing; run `cdr-bench leaderboard build --evaluate {sub.name}`"
+                )
+            e.replays = load_replays(rp, sub)
         for sc in sub.multimodality:
             mp = multimodal_path(results_dir, sub.name, sc)
             if not mp.exists():
@@ -144,7 +198,9 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
     stale = sorted(
         p.name
         for p in results_dir.glob("*.json")
-        if ".multimodal-" not in p.name and p.name not in known
+        if ".multimodal-" not in p.name
+        and not p.name.endswith(".replays.json")
+        and p.name not in known
     )
     if stale:
         raise UserError(f"{results_dir}: result files without a submission: {', '.join(stale)}")
@@ -168,23 +224,296 @@ def _same_episodes(entries: list[Entry]) -> None:
                 )
 
 
-def _metric(m: dict[str, Any]) -> dict[str, Any]:
+def _metric(m: dict[str, Any] | None) -> dict[str, Any]:
+    """``{value, ci95}`` of a measured metric; a metric the result does not hold (an older
+    result file) is ``None`` ("not measured")."""
+    if m is None:
+        return {"value": None, "ci95": [None, None]}
     return {"value": m["value"], "ci95": m["ci95"]}
 
 
-def _rank_key(metrics: dict[str, Any], name: str) -> tuple[Any, ...]:
-    def v(k: str, sign: float) -> float:
-        x = metrics[k]["value"]
-        return math.inf if x is None else sign * x
+def _ownship(e: Entry, sid: str) -> dict[str, Any]:
+    s = e.scenario(sid)
+    if s is None:
+        raise UserError(f"{e.path}: no scenario {sid}")
+    m: dict[str, Any] = s["metrics"]["ownship"]
+    return m
 
-    return (v("success_rate", -1), v("los_rate", 1), v("nmac_rate", 1), name)
+
+def _diff(row: dict[str, Any]) -> dict[str, Any]:
+    lo, hi = row["ci95"]
+    return {
+        "diff": _round(row["diff"]),
+        "ci95": [_round(lo), _round(hi)],
+        "significant": row["significant"],
+    }
+
+
+class Paired:
+    """Paired bootstrap differences between entries (the evaluator's ``compare``), each pair and
+    scenario computed once: ``get(a, b, sid)[metric]`` is b - a on the ownship."""
+
+    def __init__(self) -> None:
+        self._cache: dict[tuple[str, str, str], dict[str, dict[str, Any]]] = {}
+
+    def all(self, a: Entry, b: Entry) -> dict[tuple[str, str], dict[str, Any]]:
+        rows = compare(a.path, b.path)["rows"]
+        out = {(r["scenario"], r["metric"]): r for r in rows if r["aircraft"] == "ownship"}
+        for sid in {k[0] for k in out}:
+            self._cache[(a.name, b.name, sid)] = {m: r for (s, m), r in out.items() if s == sid}
+        return out
+
+    def get(self, a: Entry, b: Entry, sid: str) -> dict[str, dict[str, Any]]:
+        key = (a.name, b.name, sid)
+        if key not in self._cache:
+            back = self._cache.get((b.name, a.name, sid))
+            if back is not None:  # the same resampled episodes: b - a = -(a - b)
+                self._cache[key] = {
+                    m: {**r, "diff": -r["diff"], "ci95": [-r["ci95"][1], -r["ci95"][0]]}
+                    for m, r in back.items()
+                }
+            else:
+                rows = compare(a.path, b.path, [sid])["rows"]
+                self._cache[key] = {r["metric"]: r for r in rows if r["aircraft"] == "ownship"}
+        return self._cache[key]
+
+
+def _value(e: Entry, sid: str, key: str) -> float | None:
+    m = _ownship(e, sid).get(key)
+    return None if m is None else m["value"]
+
+
+def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
+    """The ranking by the headline score (see the module docstring)."""
+    sid = HEADLINE_SCENARIO
+    missing = [e.name for e in entries if e.scenario(sid) is None]
+    if missing:
+        raise UserError(
+            f"entries {', '.join(missing)} are not scored on {sid}, the headline scenario "
+            f"({HEADLINE_METRIC} on {sid} ranks the leaderboard)"
+        )
+
+    def head(e: Entry) -> float:
+        v = _value(e, sid, HEADLINE_METRIC)
+        return -math.inf if v is None else v
+
+    def tie(e: Entry) -> float:
+        v = _value(e, sid, TIE_BREAK)
+        return math.inf if v is None else v
+
+    by_score = sorted(entries, key=lambda e: (-head(e), e.name))
+    best = [e for e in by_score if head(e) == head(by_score[0])]  # the top score (co-leaders)
+    tied = best + [
+        e
+        for e in by_score[len(best) :]
+        if head(e) > -math.inf
+        and any(not paired.get(b, e, sid)[HEADLINE_METRIC]["significant"] for b in best)
+    ]
+    # by the tie-break, but never above a tied entry with a significantly higher score
+    left = sorted(tied, key=lambda e: (tie(e), -head(e), e.name))
+    tied = []
+    while left:
+
+        def beaten(e: Entry) -> bool:
+            return any(
+                head(o) > head(e) and paired.get(o, e, sid)[HEADLINE_METRIC]["significant"]
+                for o in left
+                if o is not e
+            )
+
+        pick = next((e for e in left if not beaten(e)), left[0])
+        tied.append(pick)
+        left.remove(pick)
+    order = tied + [e for e in by_score if e not in tied]
+    leader = order[0]
+    rows = []
+    for i, e in enumerate(order):
+        m = _ownship(e, sid)
+        above = None if i == 0 else _diff(paired.get(order[i - 1], e, sid)[HEADLINE_METRIC])
+        vs_leader = None if i == 0 else _diff(paired.get(leader, e, sid)[HEADLINE_METRIC])
+        rows.append(
+            {
+                "entry": e.name,
+                "group": e.sub.group,
+                "rank": i + 1,
+                "tied_with_leader": e in tied and len(tied) > 1,
+                "headline": _metric(m.get(HEADLINE_METRIC)),
+                "tie_break": _metric(m.get(TIE_BREAK)),
+                "vs_above": above,
+                "vs_leader": vs_leader,
+                "metrics": {k: _metric(m.get(k)) for k in PAPER_FIVE},
+            }
+        )
+    outside = [e for e in order if e not in tied]
+    runner_up = outside[0] if outside else None
+    base = next((e for e in entries if e.name == BASELINE), None)
+    learned = [e for e in order if e.sub.group == "learned"]
+    return {
+        "scenario": sid,
+        "metric": HEADLINE_METRIC,
+        "tie_break": TIE_BREAK,
+        "leader": leader.name,
+        "tied": [e.name for e in tied],
+        "rows": rows,
+        "top_score": [e.name for e in best],
+        "runner_up": None if runner_up is None else runner_up.name,
+        "gap": None
+        if runner_up is None
+        else {"from": best[0].name, **_diff(paired.get(best[0], runner_up, sid)[HEADLINE_METRIC])},
+        "baseline": None if base is None else base.name,
+        "learned_vs_baseline": []
+        if base is None
+        else [
+            {"entry": e.name, **_diff(paired.get(base, e, sid)[HEADLINE_METRIC])} for e in learned
+        ],
+    }
+
+
+def fixed_geometry(scenario: dict[str, Any], base_seed: int) -> bool:
+    """Whether every episode of a result's scenario starts from the identical simulator state
+    (a fixed encounter flown many times) rather than a family drawn per episode. Decided by
+    resetting the scenario's simulator with the episodes' seeds and comparing every state
+    array: whatever the scenario's source of randomness, a fixed encounter is one whose
+    episodes do not differ. The scenario is the registry's when its config hash is the
+    result's, else rebuilt from the config the result holds (with this version's defaults for
+    fields it lacks)."""
+    import numpy as np
+
+    from cdr_bench.evaluate.seeds import episode_seeds
+    from cdr_bench.scenarios import load_scenario
+    from cdr_bench.scenarios.schema import from_mapping
+    from cdr_bench.sim.core import Simulator
+
+    sid, chash = scenario["id"], scenario["config_hash"]
+    cfg = None
+    try:
+        reg = load_scenario(sid)
+        cfg = reg if reg.config_hash() == chash else None
+    except Exception:  # noqa: BLE001 - a registry that moved on: the result's own config
+        pass
+    if cfg is None:
+        try:
+            cfg = from_mapping(scenario["config"], sid)
+        except Exception as e:  # noqa: BLE001 - any schema problem is reported the same way
+            raise UserError(
+                f"scenario {sid}: the config in the result file does not load with this "
+                f"cdr-bench ({type(e).__name__}: {str(e)[:200]}); re-evaluate with "
+                "`cdr-bench leaderboard build --evaluate`"
+            ) from None
+    n = int(scenario["episodes"])
+    seeds = episode_seeds(base_seed, sid, chash, 0, n)
+    for count in (min(2, n), n):  # two episodes decide most scenarios
+        sim = Simulator(cfg, count)
+        sim.reset(seeds[:count])
+        for arr in sim.state:
+            a = np.asarray(arr)
+            if a.ndim and a.shape[0] == count and not (a == a[:1]).all():
+                return False
+    return True
+
+
+_OUTCOME_TEXT = {
+    "nmac": "NMAC at step {steps}",
+    "los": "LoS at step {steps}",
+    "timeout": "timeout after {steps} steps",
+    "boundary": "left the sector at step {steps}",
+}
+
+
+def outcome_text(rec: dict[str, Any]) -> str:
+    """One flight's outcome in words: ``success``, ``success after a LoS``, ``LoS at step 7``."""
+    if rec["outcome"] == "success":
+        return "success after a LoS" if rec["los"] else "success"
+    return _OUTCOME_TEXT.get(rec["outcome"], rec["outcome"] + " at step {steps}").format(
+        steps=rec["steps"]
+    )
+
+
+def _ownship_records(e: Entry, sid: str) -> list[dict[str, Any]]:
+    return [
+        ac
+        for ep in e.episodes
+        if ep["scenario"] == sid
+        for ac in ep["aircraft"]
+        if ac["id"].startswith("ownship")
+    ]
+
+
+def tactical_cells(e: Entry, sid: str, fixed: bool) -> dict[str, Any]:
+    """An entry's result on one tactical scenario: the success rate with its interval (a
+    family), or the single outcome of a fixed encounter (or, for an agent that draws its
+    actions, how often the repeated encounter succeeded, without an interval: the episodes
+    differ only by the agent's own randomness)."""
+    m = _ownship(e, sid)
+    if not fixed:
+        return {"kind": "rate", **_metric(m["success_rate"]), "n": m["episodes"]}
+    recs = _ownship_records(e, sid)
+    shapes = {(r["outcome"], r["steps"], bool(r["los"])) for r in recs}
+    if len(shapes) == 1:
+        return {"kind": "outcome", "text": outcome_text(recs[0]), "outcome": recs[0]["outcome"]}
+    return {
+        "kind": "varies",
+        "success": m["success_rate"]["value"],
+        "n": m["episodes"],
+        "text": f"varies: success in {100 * m['success_rate']['value']:.0f} % of "
+        f"{m['episodes']} runs",
+    }
+
+
+def _read_log(path: Path) -> list[dict[str, Any]]:
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        return [json.loads(x) for x in lines if x.strip()]
+    except (OSError, json.JSONDecodeError) as e:
+        raise UserError(f"{path}: cannot read the training log ({e})") from None
+
+
+def training_info(sub: Submission, root: Path) -> tuple[dict[str, Any] | None, list[Any]]:
+    """``(budget, curves)`` of an entry: the transitions and seeds of its training (from the
+    ``final`` lines of its logs, else as declared; ``None`` for a scripted entry) and, per log,
+    its rolling training success against transitions."""
+    if sub.group == "scripted":
+        return None, []
+    finals, curves = [], []
+    for rel in sub.training_logs:
+        rows = _read_log(root / rel)
+        fin = [r["final"] for r in rows if "final" in r]
+        if not fin or not isinstance(fin[-1].get("step"), int):
+            raise UserError(f"{root / rel}: no final line with 'step' (an unfinished log?)")
+        finals.append(fin[-1]["step"])
+        curves.append(
+            [
+                [r["step"], round(float(r["charts/success_rolling"]), 4)]
+                for r in rows
+                if "step" in r and r.get("charts/success_rolling") is not None
+            ]
+        )
+    if finals:
+        transitions: int | list[int] | None = (
+            finals[0] if len(set(finals)) == 1 else [min(finals), max(finals)]
+        )
+        budget = {"transitions": transitions, "seeds": len(finals), "source": "training logs"}
+        if sub.budget is not None and (
+            len(set(finals)) != 1 or sub.budget != (finals[0], len(finals))
+        ):
+            raise UserError(
+                f"{sub.source}: budget {{transitions: {sub.budget[0]}, seeds: {sub.budget[1]}}} "
+                f"but its training logs give {transitions} transitions, {len(finals)} seed(s)"
+            )
+    elif sub.budget is not None:
+        budget = {"transitions": sub.budget[0], "seeds": sub.budget[1], "source": "declared"}
+    else:
+        budget = {"transitions": None, "seeds": None, "source": None}
+    return budget, curves
 
 
 def build_data(
     entries: list[Entry], published: Published, reference: str = DEFAULT_REFERENCE
 ) -> dict[str, Any]:
-    """Everything the pages show, as one JSON-able dict (deterministic: no timestamps)."""
-    by_name = {e.sub.name: e for e in entries}
+    """Everything the pages show, as one JSON-able dict (deterministic: no timestamps). The
+    recorded trajectories are not in it (they are drawn by ``index.html`` from the replay
+    files); ``replays`` says which exist."""
+    by_name = {e.name: e for e in entries}
     ref = by_name.get(reference)
     if ref is None:
         raise UserError(
@@ -196,29 +525,34 @@ def build_data(
             if s["id"] not in scenario_ids:
                 scenario_ids.append(s["id"])
 
-    paired: dict[str, dict[tuple[str, str], dict[str, Any]]] = {}
+    paired = Paired()
+    vs_ref: dict[str, dict[tuple[str, str], dict[str, Any]]] = {}
     for e in entries:
         if e is ref:
             continue
         shared = [s for s in e.result["scenarios"] if ref.scenario(s["id"]) is not None]
         if len(shared) != len(e.result["scenarios"]) or len(shared) != len(ref.result["scenarios"]):
             raise UserError(
-                f"{e.sub.name}: scored on other scenarios than the reference {reference}; "
+                f"{e.name}: scored on other scenarios than the reference {reference}; "
                 "paired comparison needs the same scenarios"
             )
-        rows = compare(ref.path, e.path)["rows"]
-        paired[e.sub.name] = {
-            (r["scenario"], r["metric"]): r for r in rows if r["aircraft"] == "ownship"
-        }
+        vs_ref[e.name] = paired.all(ref, e)
+
+    ranking = rank_entries(entries, paired)
+    rank_of = {r["entry"]: r["rank"] for r in ranking["rows"]}
+    base_seed = ref.result["base_seed"]
 
     tables = []
+    fixed_of: dict[str, bool] = {}
     for sid in scenario_ids:
         rows = []
         config = None
-        for e in entries:
+        first = None
+        for e in sorted(entries, key=lambda x: rank_of[x.name]):
             s = e.scenario(sid)
             if s is None:
                 continue
+            first = first or s
             config = s["config"]
             m = s["metrics"]["ownship"]
             lat = e.result["timing"]["decision_latency"][sid]["per_decision_ms"]
@@ -227,48 +561,57 @@ def build_data(
                 if e is ref:
                     vs[key] = "reference"
                     continue
-                r = paired[e.sub.name][(sid, key)]
-                lo, hi = r["ci95"]
+                r = vs_ref[e.name][(sid, key)]
                 vs[key] = {
-                    "diff": _round(r["diff"]),
-                    "ci95": [_round(lo), _round(hi)],
-                    "significant": r["significant"],
+                    **_diff(r),
                     "direction": (
                         ("higher" if r["diff"] > 0 else "lower") if r["significant"] else "same"
                     ),
                 }
             rows.append(
                 {
-                    "entry": e.sub.name,
+                    "entry": e.name,
+                    "rank": rank_of[e.name],
                     "episodes": m["episodes"],
-                    "metrics": {c.key: _metric(m[c.key]) for c in MAIN_COLUMNS},
+                    "metrics": {c.key: _metric(m.get(c.key)) for c in COLUMNS},
                     "latency_ms": {"median": lat["median"], "p99": lat["p99"]},
                     "vs_reference": vs,
                 }
             )
-        rows.sort(key=lambda r: _rank_key(r["metrics"], r["entry"]))
-        prev, rank = None, 0
-        for i, r in enumerate(rows):
-            k = _rank_key(r["metrics"], "")
-            if k != prev:
-                rank, prev = i + 1, k
-            r["rank"] = rank
+        assert config is not None and first is not None
+        fixed_of[sid] = fixed_geometry(first, base_seed)
         best: dict[str, list[str]] = {}
         for c in MAIN_COLUMNS:
-            best[c.key] = _best(
-                [(r["entry"], r["metrics"][c.key]["value"]) for r in rows], c.higher
+            best[c.key] = (
+                _best([(r["entry"], r["metrics"][c.key]["value"]) for r in rows], c.higher)
+                if c.key in MARK_BEST
+                else []
             )
         best["latency_ms"] = _best([(r["entry"], r["latency_ms"]["median"]) for r in rows], False)
-        assert config is not None
         tables.append(
             {
                 "scenario": sid,
                 "description": config.get("description", ""),
                 "episodes": rows[0]["episodes"],
+                "fixed": fixed_of[sid],
                 "rows": rows,
                 "best": best,
             }
         )
+
+    tactical = [
+        {
+            "scenario": sid,
+            "fixed": fixed_of[sid],
+            "cells": {
+                e.name: tactical_cells(e, sid, fixed_of[sid])
+                for e in sorted(entries, key=lambda x: rank_of[x.name])
+                if e.scenario(sid) is not None
+            },
+        }
+        for sid in scenario_ids
+        if sid.startswith(TACTICAL_PREFIX)
+    ]
 
     side_by_side = []
     for e in entries:
@@ -282,7 +625,7 @@ def build_data(
             m = s["metrics"]["ownship"]
             side_by_side.append(
                 {
-                    "entry": e.sub.name,
+                    "entry": e.name,
                     "published_as": e.sub.published_as,
                     "table": pub.table,
                     "scenario": sid,
@@ -298,20 +641,33 @@ def build_data(
                 }
             )
 
+    info = {}
+    for e in entries:
+        root = e.sub.source.resolve().parent.parent.parent
+        info[e.name] = training_info(e.sub, root)
+
+    replay_entries = [e for e in sorted(entries, key=lambda x: rank_of[x.name]) if e.replays]
+    replay_scenarios = [
+        sid for sid in scenario_ids if any(sid in e.sub.replays for e in replay_entries)
+    ]
     return {
         "data_version": DATA_VERSION,
         "reference": reference,
         "scenarios": scenario_ids,
+        "groups": [*GROUPS, "published"],
         "entries": [
             {
-                "name": e.sub.name,
+                "name": e.name,
                 "display_name": e.sub.display_name,
                 "description": e.sub.description,
+                "group": e.sub.group,
                 "agent": e.sub.agent,
                 "checkpoint": e.sub.checkpoint,
                 "authors": list(e.sub.authors),
                 "reference": e.sub.reference,
                 "training": e.sub.training,
+                "training_logs": list(e.sub.training_logs),
+                "budget": info[e.name][0],
                 "published_as": e.sub.published_as,
                 "agent_sha256": e.result["agent"]["sha256"],
                 "result_file": f"results/{e.path.name}",
@@ -321,11 +677,26 @@ def build_data(
             }
             for e in entries
         ],
+        "ranking": ranking,
         "tables": tables,
+        "tactical": tactical,
         "published_vs_measured": side_by_side,
+        "learning_curves": [
+            {"entry": e.name, "logs": list(e.sub.training_logs), "series": info[e.name][1]}
+            for e in entries
+            if info[e.name][1]
+        ],
+        "replays": {
+            "entries": [e.name for e in replay_entries],
+            "scenarios": replay_scenarios,
+            "episodes": max(
+                (int((e.replays or {})["episodes"]) for e in replay_entries), default=0
+            ),
+            "files": {e.name: f"results/{e.name}.replays.json" for e in replay_entries},
+        },
         "multimodality": [
             {
-                "entry": e.sub.name,
+                "entry": e.name,
                 "scenario": sc,
                 "samples": d["samples"],
                 "seed": d["seed"],
@@ -354,3 +725,31 @@ def _best(values: list[tuple[str, float | None]], higher: bool) -> list[str]:
     target = max(v for _, v in vals) if higher else min(v for _, v in vals)
     winners = [n for n, v in vals if v == target]
     return [] if len(winners) == len(values) else winners
+
+
+def load_replays(path: Path, sub: Submission) -> dict[str, Any]:
+    """A submission's recorded trajectories (``<name>.replays.json``, written by the trusted
+    scorer), checked for shape; :class:`UserError` naming the file otherwise."""
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise UserError(f"{path}: not a replays file ({e})") from None
+    if not isinstance(d, dict) or d.get("kind") != "cdr-bench replays":
+        raise UserError(f"{path}: expected the replays of `cdr-bench leaderboard build`")
+    traces = d.get("traces")
+    if not isinstance(traces, dict) or sorted(traces) != sorted(sub.replays):
+        raise UserError(
+            f"{path}: traces of {sorted(traces) if isinstance(traces, dict) else traces}, "
+            f"{sub.source.name} replays {list(sub.replays)}; re-evaluate: "
+            f"cdr-bench leaderboard build --evaluate {sub.name}"
+        )
+    keys = ("episode", "seed", "dt_s", "size_km", "los_km", "ids", "goals_km", "frames", "outcomes")
+    for sc, eps in traces.items():
+        if not isinstance(eps, list) or not eps:
+            raise UserError(f"{path}: {sc}: expected a list of recorded episodes")
+        for i, t in enumerate(eps):
+            if not isinstance(t, dict) or any(k not in t for k in keys):
+                raise UserError(f"{path}: {sc}[{i}]: expected {', '.join(keys)}")
+            if t["episode"] != i or not t["frames"]:
+                raise UserError(f"{path}: {sc}[{i}]: expected episode {i} with frames")
+    return d

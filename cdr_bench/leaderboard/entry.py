@@ -6,6 +6,11 @@ simulator, the runner and writes the result files; the submission's agent runs i
 confined process (:mod:`cdr_bench.evaluate.sandbox`) that sees the repository read-only, with the
 leaderboard folder (results, staging) hidden, and only exchanges observations and actions with
 this one. ``SPEC.json`` is written by the build and holds plain values only.
+
+Besides the result files it maps first-action distributions (``multimodality``) and records the
+trajectories of the first episodes of the scenarios a submission replays
+(:func:`cdr_bench.evaluate.api.record_traces`: the same episodes, seeds and agent reset as the
+evaluation) into one JSON file (``replays``), here, where the simulator runs.
 """
 
 from __future__ import annotations
@@ -17,11 +22,14 @@ from typing import Any
 
 from cdr_bench.errors import UserError
 
+REPLAY_KIND = "cdr-bench replays"
+
 
 def run(spec: dict[str, Any]) -> None:
     from cdr_bench.evaluate.analysis import multimodal
-    from cdr_bench.evaluate.api import evaluate, resolve_jobs
+    from cdr_bench.evaluate.api import evaluate, record_traces, resolve_jobs
     from cdr_bench.evaluate.remote import AgentOptions
+    from cdr_bench.evaluate.results import atomic_write_text
     from cdr_bench.evaluate.sandbox import Confinement, Limits
 
     limits = Limits(**spec["limits"])
@@ -45,6 +53,23 @@ def run(spec: dict[str, Any]) -> None:
         multimodal(
             spec["agent"], mm["scenario"], spec["samples"], spec["seed"], options, out=mm["out"]
         )
+    rp = spec.get("replays")
+    if rp and rp["scenarios"]:
+        n = min(rp["episodes"], spec["episodes"], spec["batch_size"])
+        traces = {
+            sc: record_traces(
+                spec["agent"],
+                sc,
+                n,
+                base_seed=spec["seed"],
+                agent_options=options,
+                batch_size=spec["batch_size"],
+                n_episodes=spec["episodes"],
+            )
+            for sc in rp["scenarios"]
+        }
+        doc = {"kind": REPLAY_KIND, "base_seed": spec["seed"], "episodes": n, "traces": traces}
+        atomic_write_text(Path(rp["out"]), json.dumps(doc, separators=(",", ":")) + "\n")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,8 @@
 """PNG plots of the leaderboard, drawn from ``leaderboard.json`` data only.
 
+Every entry has one colour of the Okabe-Ito palette (colour-blind safe) and one marker, the same
+in every plot (:func:`entry_styles`); legends sit outside the data area; intervals are 95 %.
+
 Byte-deterministic for a given matplotlib version: Agg backend, matplotlib's default style
 (whatever the user's matplotlibrc says), no ``Software`` metadata, fixed size and dpi. The
 matplotlib version is recorded in ``index.html`` so that ``--check`` can tell a rendering
@@ -14,10 +17,33 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.evaluate.report import DENSITIES, MAIN_COLUMNS
+from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
 
 DPI = 80
-LABEL = {c.key: c.header for c in MAIN_COLUMNS}
+LABEL = {c.key: c.header for c in COLUMNS}
+KIND = {c.key: c.kind for c in COLUMNS}
+
+OKABE_ITO = ("#000000", "#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7")
+"""The Okabe-Ito palette (distinguishable with every common colour-vision deficiency), without
+its yellow, too pale on white."""
+MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">", "p", "h", "d", "8", "H")
+"""One marker per entry (with more entries than colours, the marker tells them apart)."""
+
+
+def entry_styles(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """``entry -> {color, marker, label}``: one Okabe-Ito colour and one marker per entry, by
+    its rank (the same entry looks the same in every plot; the leaders get the first colours);
+    markers are hollow for the second round of colours."""
+    out = {}
+    names = {e["name"]: e["display_name"] for e in data["entries"]}
+    for i, name in enumerate(_ranked(data)):
+        out[name] = {
+            "color": OKABE_ITO[i % len(OKABE_ITO)],
+            "marker": MARKERS[i % len(MARKERS)],
+            "mfc": OKABE_ITO[i % len(OKABE_ITO)] if (i // len(OKABE_ITO)) % 2 == 0 else "white",
+            "label": names[name],
+        }
+    return out
 
 
 def matplotlib_version() -> str:
@@ -35,25 +61,43 @@ def _png(fig: Any) -> bytes:
     return buf.getvalue()
 
 
+def _figure(width: float, height: float) -> tuple[Any, Any]:
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(figsize=(width, height), layout="constrained")
+
+
+def _legend(fig: Any) -> None:
+    """The legend outside the data area, right of the axes."""
+    fig.legend(loc="outside right upper", fontsize=8, frameon=False)
+
+
 def _density_tables(data: dict[str, Any]) -> list[dict[str, Any]]:
     return [t for t in data["tables"] if t["scenario"] in DENSITIES]
 
 
-def _names(data: dict[str, Any]) -> dict[str, str]:
-    return {e["name"]: e["display_name"] for e in data["entries"]}
+def _ranked(data: dict[str, Any]) -> list[str]:
+    """Entries in ranking order (legends follow the leaderboard)."""
+    return [r["entry"] for r in data["ranking"]["rows"]]
 
 
-def _grouped_bars(
+def _err(v: float, ci: list[float | None], scale: float) -> tuple[float, float]:
+    lo, hi = ci
+    a = v if lo is None else scale * lo
+    b = v if hi is None else scale * hi
+    return max(v - a, 0.0), max(b - v, 0.0)
+
+
+def _points(
     data: dict[str, Any], tables: list[dict[str, Any]], key: str, kind: str, title: str
 ) -> bytes:
-    import matplotlib.pyplot as plt
-
-    names = _names(data)
-    entries = [e["name"] for e in data["entries"]]
-    fig, ax = plt.subplots(figsize=(8, 4))
+    """One marker per entry and scenario with its 95 % interval, entries side by side."""
+    styles = entry_styles(data)
+    entries = _ranked(data)
+    fig, ax = _figure(10, 4.2)
     width = 0.8 / max(len(entries), 1)
     scale = 100.0 if kind == "rate" else 1.0
-    values_seen = []
+    seen = []
     for j, name in enumerate(entries):
         xs, ys, lo, hi = [], [], [], []
         for i, t in enumerate(tables):
@@ -62,61 +106,82 @@ def _grouped_bars(
                 continue
             m = row["metrics"][key]
             v = scale * m["value"]
-            a, b = (scale * x if x is not None else v for x in m["ci95"])
+            a, b = _err(v, m["ci95"], scale)
             xs.append(i - 0.4 + width * (j + 0.5))
             ys.append(v)
-            lo.append(max(v - a, 0.0))
-            hi.append(max(b - v, 0.0))
-            values_seen.append(v)
+            lo.append(a)
+            hi.append(b)
+            seen.append(v)
         if xs:
-            ax.bar(xs, ys, width, yerr=[lo, hi], capsize=3, label=names[name], color=f"C{j}")
+            st = styles[name]
+            ax.errorbar(
+                xs,
+                ys,
+                yerr=[lo, hi],
+                fmt=st["marker"],
+                color=st["color"],
+                mfc=st["mfc"],
+                ms=6,
+                capsize=2,
+                lw=1,
+                label=st["label"],
+            )
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
+    for i in range(1, len(tables)):
+        ax.axvline(i - 0.5, color="0.85", lw=0.8)
     ax.set_ylabel(f"{LABEL[key]}" + (" (%)" if kind == "rate" else ""))
     ax.set_title(title)
-    finite = [abs(v) for v in values_seen if math.isfinite(v) and v != 0]
+    finite = [abs(v) for v in seen if math.isfinite(v) and v != 0]
     if finite and max(finite) / max(min(finite), 1e-9) > 100 and kind == "mean":
         ax.set_yscale("symlog")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    _legend(fig)
     return _png(fig)
 
 
 def _success_vs_density(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
-    import matplotlib.pyplot as plt
-
-    names = _names(data)
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for j, e in enumerate(data["entries"]):
+    styles = entry_styles(data)
+    fig, ax = _figure(9, 4.2)
+    n = max(len(data["entries"]), 1)
+    for j, name in enumerate(_ranked(data)):
         xs, ys, lo, hi = [], [], [], []
         for i, t in enumerate(tables):
-            row = next((r for r in t["rows"] if r["entry"] == e["name"]), None)
+            row = next((r for r in t["rows"] if r["entry"] == name), None)
             if row is None:
                 continue
             m = row["metrics"]["success_rate"]
-            xs.append(i)
-            ys.append(100 * m["value"])
-            lo.append(100 * m["ci95"][0])
-            hi.append(100 * m["ci95"][1])
+            v = 100 * m["value"]
+            a, b = _err(v, m["ci95"], 100.0)
+            xs.append(i + 0.3 * (j / n - 0.5))
+            ys.append(v)
+            lo.append(a)
+            hi.append(b)
         if xs:
-            ax.plot(xs, ys, marker="o", label=names[e["name"]], color=f"C{j}")
-            ax.fill_between(xs, lo, hi, alpha=0.2, color=f"C{j}")
+            st = styles[name]
+            ax.errorbar(
+                xs,
+                ys,
+                yerr=[lo, hi],
+                marker=st["marker"],
+                color=st["color"],
+                mfc=st["mfc"],
+                capsize=2,
+                lw=1,
+                label=st["label"],
+            )
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
     ax.set_xlabel("traffic density")
     ax.set_ylabel("success rate (%), 95 % interval")
     ax.set_title("Success against density")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    _legend(fig)
     return _png(fig)
 
 
 def _latency(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
-    import matplotlib.pyplot as plt
-
-    names = _names(data)
-    entries = [e["name"] for e in data["entries"]]
-    fig, ax = plt.subplots(figsize=(8, 4))
+    styles = entry_styles(data)
+    entries = _ranked(data)
+    fig, ax = _figure(10, 4.2)
     width = 0.8 / max(len(entries), 1)
     for j, name in enumerate(entries):
         xs, med, p99 = [], [], []
@@ -128,16 +193,129 @@ def _latency(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
             med.append(max(row["latency_ms"]["median"], 1e-5))
             p99.append(max(row["latency_ms"]["p99"], 1e-5))
         if xs:
-            ax.bar(xs, med, width, label=names[name], color=f"C{j}")
-            ax.scatter(xs, p99, marker="_", s=120, color="k", zorder=3)
+            st = styles[name]
+            ax.scatter(xs, med, marker=st["marker"], color=st["color"], label=st["label"], zorder=3)
+            ax.scatter(xs, p99, marker="_", s=80, color=st["color"], zorder=3)
     ax.set_yscale("log")
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
-    ax.set_ylabel("ms per decision (bar: median, dash: p99)")
+    ax.set_ylabel("ms per decision (marker: median, dash: p99)")
     ax.set_title("Decision latency (machine-dependent; batched calls)")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    _legend(fig)
     return _png(fig)
+
+
+def pareto_front(points: list[tuple[str, float, float]]) -> list[str]:
+    """Names of the non-dominated points when both coordinates are to be minimised (a point is
+    dominated when another is no worse in both and better in one), in increasing x."""
+    front = []
+    for n, x, y in points:
+        if not any(
+            (x2 <= x and y2 <= y) and (x2 < x or y2 < y) for n2, x2, y2 in points if n2 != n
+        ):
+            front.append((x, y, n))
+    return [n for _, _, n in sorted(front)]
+
+
+def _pareto(data: dict[str, Any], table: dict[str, Any]) -> bytes:
+    """Safety (LoS rate) against efficiency (extra path of successful flights) on the headline
+    scenario, each with its 95 % interval, and the non-dominated front."""
+    styles = entry_styles(data)
+    fig, ax = _figure(9, 5)
+    pts = []
+    for name in _ranked(data):
+        row = next((r for r in table["rows"] if r["entry"] == name), None)
+        if row is None:
+            continue
+        x_m, y_m = row["metrics"]["extra_path_km"], row["metrics"]["los_rate"]
+        if x_m["value"] is None or y_m["value"] is None:
+            continue
+        x, y = x_m["value"], 100 * y_m["value"]
+        pts.append((name, x, y))
+        st = styles[name]
+        ax.errorbar(
+            [x],
+            [y],
+            xerr=[[a] for a in _err(x, x_m["ci95"], 1.0)],
+            yerr=[[a] for a in _err(y, y_m["ci95"], 100.0)],
+            fmt=st["marker"],
+            color=st["color"],
+            mfc=st["mfc"],
+            ms=7,
+            capsize=2,
+            lw=1,
+            label=st["label"],
+        )
+    front = pareto_front(pts)
+    if front:
+        xy = {n: (x, y) for n, x, y in pts}
+        fx = [xy[n][0] for n in front]
+        fy = [xy[n][1] for n in front]
+        ax.step(fx, fy, where="post", color="0.4", ls="--", lw=1, label="non-dominated front")
+    xs = [x for _, x, _ in pts]
+    if xs and max(xs) > 50:
+        ax.set_xscale("symlog", linthresh=1.0)  # a few entries detour by hundreds of km
+    ax.set_xlabel("extra path of successful flights, km (95 % interval)")
+    ax.set_ylabel("LoS rate, % of episodes (95 % interval)")
+    ax.set_title(f"Safety against efficiency on {table['scenario']} (lower left is better)")
+    ax.grid(alpha=0.3)
+    _legend(fig)
+    return _png(fig)
+
+
+def _curves(data: dict[str, Any], names: list[str], title: str) -> bytes:
+    """Rolling training success against transitions: one line per entry (the mean over its
+    logs, with the min-max band when it has several seeds)."""
+    styles = entry_styles(data)
+    by = {c["entry"]: c for c in data["learning_curves"]}
+    fig, ax = _figure(9, 4.5)
+    for name in names:
+        series = [np.asarray(s, float) for s in by[name]["series"] if s]
+        if not series:
+            continue
+        st = styles[name]
+        x = series[0][:, 0]
+        ys = np.stack([np.interp(x, s[:, 0], s[:, 1]) for s in series])
+        x = x / 1e6
+        mean = 100 * ys.mean(axis=0)
+        label = st["label"] + (f" ({len(series)} seeds)" if len(series) > 1 else "")
+        ax.plot(
+            x,
+            mean,
+            color=st["color"],
+            marker=st["marker"],
+            mfc=st["mfc"],
+            markevery=max(len(x) // 8, 1),
+            lw=1.2,
+            label=label,
+        )
+        if len(series) > 1:
+            ax.fill_between(
+                x, 100 * ys.min(axis=0), 100 * ys.max(axis=0), color=st["color"], alpha=0.2
+            )
+    ax.set_xlabel("transitions (millions)")
+    ax.set_ylabel("rolling training success (%)")
+    ax.set_title(
+        f"{title}\n(the last training episodes on the scenario being trained; with a curriculum "
+        "its current stage, so it drops at each promotion; not an evaluation)",
+        fontsize=9,
+    )
+    ax.set_ylim(-2, 102)
+    ax.grid(alpha=0.3)
+    _legend(fig)
+    return _png(fig)
+
+
+def _tactical(data: dict[str, Any]) -> bytes | None:
+    """Success per tactical family with its 95 % interval (fixed encounters are single
+    outcomes, in the table only)."""
+    fams = [t for t in data["tactical"] if not t["fixed"]]
+    if not fams:
+        return None
+    tables = [next(x for x in data["tables"] if x["scenario"] == t["scenario"]) for t in fams]
+    return _points(
+        data, tables, "success_rate", "rate", "Success per tactical family (95 % intervals)"
+    )
 
 
 def _heatmap(mm: dict[str, Any], title: str) -> bytes:
@@ -179,7 +357,8 @@ def _heatmap(mm: dict[str, Any], title: str) -> bytes:
 
 
 def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
-    """``file name -> PNG bytes`` of every plot (names are stable: they are linked)."""
+    """``file name -> PNG bytes`` of every plot (names are stable: they are linked), the
+    headline plots first."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -187,20 +366,35 @@ def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
 
     out: dict[str, bytes] = {}
     with matplotlib.style.context("default"), matplotlib.rc_context({"svg.hashsalt": "cdr"}):
+        head = next(
+            (t for t in data["tables"] if t["scenario"] == data["ranking"]["scenario"]), None
+        )
+        if head is not None:
+            out["pareto.png"] = _pareto(data, head)
+        groups = {e["name"]: e["group"] for e in data["entries"]}
+        with_logs = [c["entry"] for c in data["learning_curves"]]
+        learned = [n for n in _ranked(data) if n in with_logs and groups[n] == "learned"]
+        ablations = [n for n in _ranked(data) if n in with_logs and groups[n] == "ablation"]
+        if learned:
+            out["learning_curves.png"] = _curves(
+                data, learned, "Learning curves: rolling success of training episodes"
+            )
+        if ablations:
+            out["learning_curves_ablations.png"] = _curves(
+                data, ablations, "Learning curves of the ablations"
+            )
+        tact = _tactical(data)
+        if tact is not None:
+            out["tactical_success_rate.png"] = tact
         dens = _density_tables(data)
         if dens:
             for c in MAIN_COLUMNS:
-                out[f"{c.key}.png"] = _grouped_bars(
+                out[f"{c.key}.png"] = _points(
                     data, dens, c.key, c.kind, f"{LABEL[c.key]} per density (95 % intervals)"
                 )
             out["success_vs_density.png"] = _success_vs_density(data, dens)
             out["latency.png"] = _latency(data, dens)
-        tact = [t for t in data["tables"] if t["scenario"].startswith("tactical/")]
-        if tact:
-            out["tactical_success_rate.png"] = _grouped_bars(
-                data, tact, "success_rate", "rate", "Success on the tactical scenarios"
-            )
-        names = _names(data)
+        names = {e["name"]: e["display_name"] for e in data["entries"]}
         for mm in data["multimodality"]:
             fname = f"multimodal-{mm['entry']}-{mm['scenario'].replace('/', '_')}.png"
             out[fname] = _heatmap(mm, f"{names[mm['entry']]} on {mm['scenario']}")

@@ -1,28 +1,40 @@
 """``leaderboard/README.md`` and the self-contained ``leaderboard/index.html`` from the
-leaderboard data (:func:`cdr_bench.leaderboard.data.build_data`) and the plots.
+leaderboard data (:func:`cdr_bench.leaderboard.data.build_data`), the plots and the recorded
+replays.
 
-Both pages show the same tables: one per scenario (measured here, ranked), the entries, the
-paper's published numbers in their own section, and "published vs measured here". The HTML page
-has no external assets: CSS and the table-sorting script are inline, the plots are data URIs.
+Both pages open with a generated conclusion (:func:`conclusion`: who ranks first on the
+headline score, whether the gap is significant, how the learned agents compare with ``mvp``),
+then the ranking, the paper's Table 2 on the headline scenario beside it (marked published,
+never ranked), success per tactical scenario, one table per scenario, the entries, the paper's
+tables and "published vs measured here". The HTML page adds a filter by group (scripted,
+learned, ablation, published), sortable tables and the replays: the same tactical episodes
+flown by each replayed entry, side by side, drawn on canvases from the recorded trajectories.
+It has no external assets: CSS, scripts and data are inline, the plots are data URIs.
 """
 
 from __future__ import annotations
 
 import base64
 import html
+import json
 from typing import Any
 
 from cdr_bench.evaluate.report import (
+    COLUMNS,
     HIGHER,
     LOWER,
     Rows,
     entries_table,
+    fmt_metric,
+    fmt_value,
     html_table,
     inline_md,
     md_table,
     published_table,
+    ranking_table,
     scenario_table,
     side_by_side_tables,
+    tactical_table,
 )
 from cdr_bench.leaderboard.published import Published
 
@@ -33,19 +45,155 @@ INTRO = (
     "episodes (episode i of a scenario has the same seed and traffic for every entry) in its "
     "own sandboxed process; the result files are in `results/`. Rates are per episode with 95 % "
     "Wilson intervals, means (steps of successful episodes, episode sums of the goal and safety "
-    "rewards R_G / R_S) with 95 % bootstrap intervals. **Bold**: the best value of the column "
-    "(not marked when every entry ties). {up} / {down}: significantly higher / lower than "
+    "rewards R_G / R_S) with 95 % bootstrap intervals. Rows follow the ranking. **Bold**: the "
+    "best value of a column where a better value cannot come from failing (success, clean "
+    "success, LoS, NMAC, invalid actions, latency; never steps, timeouts or rewards), not "
+    "marked when every entry ties. {up} / {down}: significantly higher / lower than "
     "{ref} on the same episodes (95 % paired bootstrap interval of the difference excludes 0; "
-    "`cdr-bench compare`). Rows are ranked by success rate, then LoS rate, then NMAC rate. "
-    "Invalid is the share of decisions that chose a masked action. "
+    "`cdr-bench compare`). Invalid is the share of decisions that chose a masked action. "
     "Latency is the median / p99 time per decision in ms (batched calls, one thread) on the "
     "machine that last ran `build --evaluate`: it is machine-dependent and `--check` does not "
     "re-measure it."
 )
 
+HEADLINE_NOTE = (
+    "**Headline score: clean success on `{sc}`** — the share of episodes in which the ownship "
+    "reaches its goal with no loss of separation at all (95 % Wilson interval). Success alone "
+    "does not separate the agents (an agent that flies through a LoS still succeeds, and on "
+    "`{sc}` even one that never manoeuvres succeeds almost always); clean success counts the "
+    "episodes a controller would accept and cannot be improved by failing. The entries with "
+    "the top score and those whose paired difference from one of them is not significant (95 % "
+    "paired bootstrap on the same episodes) are statistically tied and ordered by extra path "
+    "(km flown beyond the direct route by successful flights, lower first; never above a tied "
+    "entry with a significantly higher score); the others follow by headline score. "
+    '"vs row above": the paired difference from the entry ranked just above, in points, '
+    "{down} when significant. Beside it the paper's five metrics on `{sc}` (success, LoS, NMAC, "
+    "timeout, steps of successful episodes) and the training budget (transitions and seeds, "
+    "from the entry's training logs; `-` for scripted agents). Efficiency (steps, extra path) "
+    "is comparable only among agents that succeed equally often."
+)
+
+TACTICAL_NOTE = (
+    "Success per tactical scenario, entries in ranking order. A family draws its encounter "
+    "geometry per episode: success rate with its 95 % Wilson interval. A fixed scenario "
+    "starts every episode from the same state (checked by resetting the simulator with every "
+    "episode's seed): it is one encounter, shown as its single outcome (for an agent that draws "
+    "its actions at random, how often the repeated encounter succeeded, without an interval)."
+)
+
+GROUP_LABEL = {
+    "scripted": "scripted",
+    "learned": "learned",
+    "ablation": "ablation",
+    "published": "published (paper)",
+}
+
 
 def _anchor(sid: str) -> str:
     return "scenario-" + sid.replace("/", "-")
+
+
+def _names(data: dict[str, Any]) -> dict[str, str]:
+    return {e["name"]: e["display_name"] for e in data["entries"]}
+
+
+def _pct(m: dict[str, Any]) -> str:
+    return fmt_metric("rate", m)
+
+
+def _pp(d: dict[str, Any], sign: float = 1.0) -> str:
+    def f(x: float) -> str:
+        return f"{round(100 * x, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
+
+    lo, hi = d["ci95"]
+    a, b = sorted((sign * lo, sign * hi))
+    return f"{f(sign * d['diff'])} points [{f(a)}, {f(b)}]"
+
+
+def conclusion(data: dict[str, Any]) -> list[str]:
+    """The generated conclusion (Markdown paragraphs): who ranks first on the headline score,
+    whether the gap is significant, how the learned agents compare with the baseline."""
+    rk = data["ranking"]
+    names = _names(data)
+    rows = {r["entry"]: r for r in rk["rows"]}
+    header = {c.key: c.header for c in COLUMNS}
+    lead = rows[rk["leader"]]
+    n = next(t["episodes"] for t in data["tables"] if t["scenario"] == rk["scenario"])
+    out = []
+    first = (
+        f"**{names[rk['leader']]}** ranks first on the headline score, "
+        f"{header[rk['metric']]} on `{rk['scenario']}`: {_pct(lead['headline'])} "
+        f"({n} episodes)."
+    )
+    tied = [t for t in rk["tied"] if t != rk["leader"]]
+    if tied:
+        tb = ", ".join(
+            f"{names[t]} {fmt_metric('mean', rows[t]['tie_break'], ci=False)} km"
+            for t in rk["tied"]
+        )
+        others = ", ".join(f"{names[t]} ({_pct(rows[t]['headline'])})" for t in tied)
+        first += (
+            f" Its lead is not significant: statistically tied with it (paired difference from "
+            f"the top score not significant) are {others}; the tie is broken by extra path "
+            f"({tb})."
+        )
+    if rk["runner_up"] is not None and rk["gap"] is not None:
+        ru, gap = rk["runner_up"], rk["gap"]
+        if tied:
+            first += (
+                f" Every other entry is significantly below the top score: the best of them, "
+                f"{names[ru]} ({_pct(rows[ru]['headline'])}), by {_pp(gap)} against "
+                f"{names[gap['from']]}"
+            )
+        else:
+            first += (
+                f" Its lead over the runner-up, {names[ru]} ({_pct(rows[ru]['headline'])}), "
+                f"is significant: {_pp(gap)}"
+            )
+        first += " (95 % paired bootstrap on the same episodes)."
+    out.append(first)
+    base = rk["baseline"]
+    vs = rk["learned_vs_baseline"]
+    if base is not None and vs:
+        better = [v["entry"] for v in vs if v["significant"] and v["diff"] > 0]
+        worse = [v["entry"] for v in vs if v["significant"] and v["diff"] < 0]
+        same = [v["entry"] for v in vs if not v["significant"]]
+        best = vs[0]  # learned entries in ranking order
+        parts = []
+        for label, group in (
+            ("significantly above", better),
+            ("not significantly different from", same),
+            ("significantly below", worse),
+        ):
+            if group:
+                parts.append(f"{len(group)} {label} it ({', '.join(names[g] for g in group)})")
+        out.append(
+            f"Against {names[base]} (scripted resolver, rank {rows[base]['rank']}, "
+            f"{_pct(rows[base]['headline'])}), the {len(vs)} learned agents are "
+            + "; ".join(parts)
+            + f". The best learned agent, {names[best['entry']]} (rank "
+            f"{rows[best['entry']]['rank']}), differs from {names[base]} by {_pp(best)}."
+        )
+    succ = {r["entry"]: r["metrics"]["success_rate"]["value"] for r in rk["rows"]}
+    learned = [succ[r["entry"]] for r in rk["rows"] if r["group"] == "learned"]
+    if "direct" in succ and learned and succ["direct"] is not None:
+        out.append(
+            f"Success alone hardly separates them: on `{rk['scenario']}` {names['direct']}, "
+            f"which never manoeuvres, succeeds in {fmt_value('rate', succ['direct'])} of the "
+            f"episodes, the learned agents in {fmt_value('rate', min(learned))}–"
+            f"{fmt_value('rate', max(learned))}."
+        )
+    return out
+
+
+def table2_beside(pub: Published, scenario: str) -> tuple[str, list[str], Rows]:
+    """The paper's Table 2 rows on the headline scenario, as published."""
+    rows = [(r.row, r.density, r.values) for r in pub.table("Table 2") if r.density == scenario]
+    title = (
+        f"The paper's Table 2 on {scenario} — published, from the paper's own simulator; "
+        "not measured here and never ranked"
+    )
+    return (title, *published_table("agent", pub.columns2, rows))
 
 
 def published_tables(pub: Published) -> list[tuple[str, list[str], Rows]]:
@@ -61,31 +209,49 @@ def published_tables(pub: Published) -> list[tuple[str, list[str], Rows]]:
 
 
 def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> str:
-    ref = next(e["display_name"] for e in data["entries"] if e["name"] == data["reference"])
+    ref = _names(data)[data["reference"]]
+    rk = data["ranking"]
     out = [
         "# cdr-bench leaderboard",
         "",
         "Generated by `cdr-bench leaderboard build` from the submissions and result files in "
         "this folder; do not edit by hand (`cdr-bench leaderboard build --check` fails if this "
-        "page differs from what the code produces). The same tables, sortable, with the plots: "
-        "`index.html`. How to add an entry: CONTRIBUTING.md, “Add a leaderboard entry”.",
+        "page differs from what the code produces). The same tables, sortable and filterable "
+        "by group, with the plots and the replays of tactical episodes: `index.html`. How to "
+        "add an entry: CONTRIBUTING.md, “Add a leaderboard entry”.",
         "",
-        INTRO.format(up=HIGHER, down=LOWER, ref=ref),
-        "",
-        "## Measured here",
+        "## In one minute",
         "",
     ]
+    for para in conclusion(data):
+        out += [para, ""]
+    head, rows, _ = ranking_table(data)
+    out += [
+        f"## Ranking: clean success on {rk['scenario']}",
+        "",
+        md_table(head, rows, numeric_from=3, text_from=len(head)),
+        "",
+        HEADLINE_NOTE.format(sc=rk["scenario"], down=LOWER),
+        "",
+    ]
+    title, head, rows = table2_beside(pub, rk["scenario"])
+    out += [f"### {title}", "", md_table(head, rows), ""]
+    if data["tactical"]:
+        head, rows, _ = tactical_table(data)
+        out += ["## Tactical scenarios", "", TACTICAL_NOTE, "", md_table(head, rows), ""]
+    out += ["## Measured here, per scenario", "", INTRO.format(up=HIGHER, down=LOWER, ref=ref), ""]
     for t in data["tables"]:
         head, rows = scenario_table(data, t)
+        fixed = " A fixed encounter: values without intervals." if t["fixed"] else ""
         out += [
             f"### {t['scenario']}",
             "",
-            f"{t['description']} — {t['episodes']} episodes per entry.",
+            f"{t['description']} — {t['episodes']} episodes per entry.{fixed}",
             "",
             md_table(head, rows),
             "",
         ]
-    head, rows = entries_table(data)
+    head, rows, _ = entries_table(data)
     out += ["## Entries", "", md_table(head, rows, numeric_from=len(head)), ""]
     out += [
         "## Published numbers (the paper; not measured here)",
@@ -113,6 +279,17 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
     out += ["## Plots", ""]
     for p in plots:
         out += [f"![{p}](plots/{p})", ""]
+    rp = data["replays"]
+    if rp["entries"]:
+        out += [
+            "## Replays",
+            "",
+            f"`index.html` replays the first {rp['episodes']} episodes of "
+            f"{', '.join(f'`{s}`' for s in rp['scenarios'])} side by side for "
+            f"{', '.join(_names(data)[n] for n in rp['entries'])}, drawn in the page from the "
+            "trajectories recorded by the scorer (`results/<entry>.replays.json`).",
+            "",
+        ]
     out += [
         "## Reproduce",
         "",
@@ -143,7 +320,7 @@ h1{margin-bottom:.2rem}h2{margin-top:2.2rem;border-bottom:1px solid #d0d7de;padd
 table{border-collapse:collapse;margin:.6rem 0 1.2rem;font-size:.86rem}
 th,td{border:1px solid #d0d7de;padding:.3rem .5rem;text-align:right;white-space:nowrap}
 th:nth-child(-n+2),td:nth-child(-n+2){text-align:left}
-th{background:#f6f8fa;position:sticky;top:0}
+th{background:#f6f8fa}
 table.sortable th{cursor:pointer;user-select:none}
 table.sortable th[aria-sort=ascending]::after{content:" \\25B2"}
 table.sortable th[aria-sort=descending]::after{content:" \\25BC"}
@@ -151,10 +328,23 @@ td.best{font-weight:700;background:#dafbe1}
 .mark{color:#6e7781;margin-left:.2rem}
 .note{color:#57606a;max-width:75rem}
 .published{background:#fff8c5}
+.conclusion{background:#f6f8fa;border-left:4px solid #0072B2;padding:.5rem 1rem;max-width:75rem}
+#filter{position:sticky;top:0;background:#fff;padding:.4rem 0;border-bottom:1px solid #d0d7de;
+z-index:2}
+#filter label{margin-right:1rem}
+[hidden]{display:none!important}
 img{max-width:100%;border:1px solid #d0d7de;margin:.4rem 0}
 code{background:#f6f8fa;padding:0 .2rem}
 nav a{margin-right:1rem}
 .scroll{overflow-x:auto}
+.replay{margin:1rem 0 2rem}
+.replay .controls{margin:.3rem 0}
+.replay .controls>*{margin-right:.6rem;vertical-align:middle}
+.replay .panes{display:flex;flex-wrap:wrap;gap:.8rem}
+.replay figure{margin:0}
+.replay canvas{border:1px solid #d0d7de;background:#fff}
+.replay figcaption{font-size:.85rem;max-width:320px}
+.key{font-size:.85rem;color:#57606a}
 """
 
 _JS = """
@@ -177,9 +367,146 @@ _JS = """
         sortTable(table,i,th.getAttribute('aria-sort')==='ascending'?'descending':'ascending')});
     });
   });
-  var m=/^#sort=([^:]+):(\\d+):(ascending|descending)$/.exec(location.hash);
+  /* options in the fragment: #sort=TABLE:COLUMN:DIRECTION&groups=learned,scripted */
+  var opts={};
+  location.hash.replace(/^#/,'').split('&').forEach(function(p){var i=p.indexOf('=');
+    if(i>0){opts[p.slice(0,i)]=decodeURIComponent(p.slice(i+1))}});
+  var m=/^([^:]+):(\\d+):(ascending|descending)$/.exec(opts.sort||'');
   if(m){var t=document.getElementById(m[1]);if(t){sortTable(t,Number(m[2]),m[3])}}
   document.body.setAttribute('data-sortable-tables',String(tables.length));
+
+  /* the group filter: hides every element of an unticked group */
+  var boxes=Array.prototype.slice.call(document.querySelectorAll('#filter input'));
+  function applyFilter(){
+    var on={};boxes.forEach(function(b){on[b.value]=b.checked});
+    var hidden=0;
+    Array.prototype.forEach.call(document.querySelectorAll('[data-group]'),function(el){
+      var h=!on[el.getAttribute('data-group')];el.hidden=h;if(h){hidden++}});
+    document.body.setAttribute('data-groups-shown',
+      boxes.filter(function(b){return b.checked}).map(function(b){return b.value}).join(','));
+    document.body.setAttribute('data-hidden',String(hidden));
+  }
+  if(opts.groups!==undefined){var want=opts.groups.split(',');
+    boxes.forEach(function(b){b.checked=want.indexOf(b.value)>=0})}
+  boxes.forEach(function(b){b.addEventListener('change',applyFilter)});
+  applyFilter();
+
+  /* replays: the same episodes side by side, drawn from the recorded trajectories */
+  var el=document.getElementById('replay-data');
+  if(!el){return}
+  var RD=JSON.parse(el.textContent);
+  var LEVEL=['#0072B2','#E69F00','#009E73'], LOS='#D55E00';
+  var drawnCanvases=0;
+  function bounds(ts){
+    var x0=1e9,y0=1e9,x1=-1e9,y1=-1e9;
+    function add(x,y){x0=Math.min(x0,x);y0=Math.min(y0,y);x1=Math.max(x1,x);y1=Math.max(y1,y)}
+    /* the encounter: every aircraft of every frame (a far goal is an arrow at the edge) */
+    ts.forEach(function(t){
+      t.frames.forEach(function(f){f.c.forEach(function(a){add(a[0],a[1])});
+        f.b.forEach(function(a){add(a[0],a[1])})});
+    });
+    var pad=ts[0].los_km*1.5,w=x1-x0+2*pad,h=y1-y0+2*pad,side=Math.max(w,h,8*ts[0].los_km);
+    var cx=(x0+x1)/2,cy=(y0+y1)/2;
+    return {x0:cx-side/2,y0:cy-side/2,x1:cx+side/2,y1:cy+side/2};
+  }
+  var NAMES={success:'success',los:'LoS',nmac:'NMAC',timeout:'timeout',
+    boundary:'left the sector'};
+  function outcome(t){var o=t.outcomes[0],n=t.frames.length-1;
+    return (NAMES[o]||o)+(o==='success'?' in ':' at step ')+n+(o==='success'?' steps':'')}
+  function drawTrace(cv,t,k,bb){
+    var ctx=cv.getContext('2d'),W=cv.width,H=cv.height;
+    var s=Math.min(W/(bb.x1-bb.x0),(H-24)/(bb.y1-bb.y0));
+    function X(x){return (x-bb.x0)*s+(W-(bb.x1-bb.x0)*s)/2}
+    function Y(y){return H-((y-bb.y0)*s+(H-24-(bb.y1-bb.y0)*s)/2)}
+    k=Math.min(k,t.frames.length-1);
+    var f=t.frames[k];
+    ctx.fillStyle='#ffffff';ctx.fillRect(0,0,W,H);
+    /* scale bar */
+    var bar=[1,2,5,10,20,50,100,200].filter(function(v){return v*s<W/3}).pop()||1;
+    ctx.strokeStyle='#57606a';ctx.lineWidth=2;ctx.beginPath();
+    ctx.moveTo(10,H-10);ctx.lineTo(10+bar*s,H-10);ctx.stroke();
+    ctx.fillStyle='#57606a';ctx.font='11px sans-serif';ctx.fillText(bar+' km',14+bar*s,H-6);
+    /* goals: a crossed circle, or an arrow at the edge pointing to a goal out of view */
+    t.goals_km.forEach(function(g,m){ctx.strokeStyle='#1b1f24';ctx.fillStyle='#1b1f24';
+      ctx.lineWidth=1.5;var gx=X(g[0]),gy=Y(g[1]);
+      if(gx>8&&gx<W-8&&gy>22&&gy<H-8){
+        ctx.beginPath();ctx.arc(gx,gy,6,0,2*Math.PI);ctx.stroke();
+        ctx.beginPath();ctx.moveTo(gx-4,gy);ctx.lineTo(gx+4,gy);
+        ctx.moveTo(gx,gy-4);ctx.lineTo(gx,gy+4);ctx.stroke();return}
+      var a0=t.frames[0].c[m],ox=X(a0[0]),oy=Y(a0[1]),ang=Math.atan2(gy-oy,gx-ox);
+      var r=Math.min(W,H-24)/2-14,ex=W/2+r*Math.cos(ang),ey=(H+24)/2+r*Math.sin(ang);
+      var d=Math.round(Math.hypot(g[0]-a0[0],g[1]-a0[1]));
+      ctx.save();ctx.translate(ex,ey);ctx.rotate(ang);ctx.beginPath();
+      ctx.moveTo(8,0);ctx.lineTo(-4,5);ctx.lineTo(-4,-5);ctx.closePath();ctx.fill();
+      ctx.restore();ctx.font='10px sans-serif';
+      ctx.fillText('goal '+d+' km',Math.min(Math.max(ex-30,2),W-70),ey+(ey>H/2?-9:16))});
+    /* trails of the controlled aircraft */
+    t.ids.forEach(function(_,m){ctx.strokeStyle=m===0?'#1b1f24':'#6e7781';ctx.lineWidth=1;
+      ctx.setLineDash(m===0?[]:[3,3]);ctx.beginPath();
+      for(var j=0;j<=k;j++){var a=t.frames[j].c[m];
+        if(j===0){ctx.moveTo(X(a[0]),Y(a[1]))}else{ctx.lineTo(X(a[0]),Y(a[1]))}}
+      ctx.stroke();ctx.setLineDash([])});
+    /* background aircraft: disc in the colour of their level */
+    f.b.forEach(function(a){ctx.fillStyle=LEVEL[a[2]]||'#000';ctx.beginPath();
+      ctx.arc(X(a[0]),Y(a[1]),5,0,2*Math.PI);ctx.fill();
+      ctx.fillStyle='#1b1f24';ctx.font='10px sans-serif';
+      ctx.fillText('FL'+a[2],X(a[0])+7,Y(a[1])-5)});
+    /* controlled aircraft: ownship a triangle, learning intruders squares; LoS ring */
+    f.c.forEach(function(a,m){
+      var x=X(a[0]),y=Y(a[1]),prev=t.frames[Math.max(k-1,0)].c[m],
+        nxt=t.frames[Math.min(k+1,t.frames.length-1)].c[m];
+      var dx=(k>0?a[0]-prev[0]:nxt[0]-a[0]),dy=(k>0?a[1]-prev[1]:nxt[1]-a[1]);
+      var ang=(dx===0&&dy===0)?0:Math.atan2(-dy,dx);
+      ctx.strokeStyle=f.los[m]?LOS:'#afb8c1';ctx.lineWidth=f.los[m]?3:1;
+      ctx.setLineDash(f.los[m]?[]:[4,4]);ctx.beginPath();
+      ctx.arc(x,y,t.los_km*s,0,2*Math.PI);ctx.stroke();ctx.setLineDash([]);
+      ctx.save();ctx.translate(x,y);ctx.rotate(ang);ctx.beginPath();
+      if(m===0){ctx.moveTo(9,0);ctx.lineTo(-6,6);ctx.lineTo(-6,-6);ctx.closePath()}
+      else{ctx.rect(-5,-5,10,10)}
+      ctx.fillStyle=a[3]?(LEVEL[a[2]]||'#000'):'#ffffff';ctx.fill();
+      ctx.strokeStyle='#1b1f24';ctx.lineWidth=2;ctx.stroke();ctx.restore();
+      ctx.fillStyle='#1b1f24';ctx.font='bold 10px sans-serif';
+      ctx.fillText((m===0?'own ':'')+'FL'+a[2],x+9,y+12);
+    });
+    var last=k===t.frames.length-1;
+    ctx.fillStyle=f.los.some(function(v){return v})?LOS:'#1b1f24';ctx.font='12px sans-serif';
+    ctx.fillText('step '+k+'/'+(t.frames.length-1)+(last?'  '+outcome(t):'')
+      +(f.los.some(function(v){return v})?'  LoS':''),8,14);
+    if(!cv.hasAttribute('data-drawn')){drawnCanvases++;
+      document.body.setAttribute('data-replay-drawn',String(drawnCanvases))}
+    var r=cv.getBoundingClientRect();
+    cv.setAttribute('data-drawn',String(k));
+    cv.setAttribute('data-rect',[Math.round(r.left+window.scrollX),Math.round(r.top+window.scrollY),
+      Math.round(r.width),Math.round(r.height)].join(','));
+  }
+  Array.prototype.forEach.call(document.querySelectorAll('.replay'),function(box){
+    var sc=RD.scenarios[box.getAttribute('data-scenario')];
+    var canvases=Array.prototype.slice.call(box.querySelectorAll('canvas'));
+    var slider=box.querySelector('input[type=range]'),btn=box.querySelector('button'),
+      label=box.querySelector('.step'),sel=box.querySelector('select');
+    var ep=0,frame=0,timer=null;
+    function traces(){return canvases.map(function(c){return sc[c.getAttribute('data-entry')][ep]})}
+    function draw(){
+      var ts=traces(),bb=bounds(ts),
+        n=Math.max.apply(null,ts.map(function(t){return t.frames.length}));
+      frame=Math.min(frame,n-1);slider.max=String(n-1);slider.value=String(frame);
+      label.textContent='step '+frame+' / '+(n-1);
+      canvases.forEach(function(c,i){drawTrace(c,ts[i],frame,bb);
+        var cap=c.parentNode.querySelector('.outcome');
+        if(cap){cap.textContent='ownship: '+outcome(ts[i])}});
+      return n;
+    }
+    function stop(){if(timer){clearInterval(timer);timer=null}btn.textContent='play'}
+    btn.addEventListener('click',function(){
+      if(timer){stop();return}
+      var n=draw();if(frame>=n-1){frame=0}
+      btn.textContent='pause';
+      timer=setInterval(function(){frame++;var n=draw();if(frame>=n-1){stop()}},250);
+    });
+    slider.addEventListener('input',function(){stop();frame=Number(slider.value);draw()});
+    sel.addEventListener('change',function(){stop();ep=Number(sel.value);frame=1e9;draw()});
+    frame=1e9;draw();  /* open on the last step: whole tracks and outcomes at a glance */
+  });
 })();
 """
 
@@ -188,10 +515,74 @@ def _esc(s: str) -> str:
     return html.escape(s, quote=True)
 
 
+def _groups_of(data: dict[str, Any], table: dict[str, Any]) -> list[str]:
+    group = {e["name"]: e["group"] for e in data["entries"]}
+    return [group[r["entry"]] for r in table["rows"]]
+
+
+def _replay_html(data: dict[str, Any], replays: dict[str, dict[str, Any]]) -> list[str]:
+    rp = data["replays"]
+    if not rp["entries"]:
+        return []
+    names = _names(data)
+    group = {e["name"]: e["group"] for e in data["entries"]}
+    payload: dict[str, Any] = {"scenarios": {}}
+    b = [
+        '<h2 id="replays">Replays: the same tactical episodes side by side</h2>',
+        '<p class="note">The first episodes of each replayed tactical scenario (the same seeds '
+        "as the evaluation), flown by each replayed entry, drawn from the trajectories the "
+        "scorer recorded (<code>results/&lt;entry&gt;.replays.json</code>). Play, pause, or drag "
+        "the slider; the panes move together. Each opens on its last step.</p>",
+        '<p class="key">▲ ownship (solid trail) · ■ learning intruder (dashed trail) · ● '
+        "background traffic · colour = flight level: "
+        '<span style="color:#0072B2">■ FL0</span> <span style="color:#E69F00">■ FL1</span> '
+        '<span style="color:#009E73">■ FL2</span> (hollow: no longer flying) · ring = LoS '
+        'distance around the aircraft, <span style="color:#D55E00">red</span> during a loss of '
+        "separation · ⊕ goal (an arrow at the edge when out of view).</p>",
+    ]
+    for sid in rp["scenarios"]:
+        who = [n for n in rp["entries"] if sid in replays[n]["traces"]]
+        payload["scenarios"][sid] = {n: replays[n]["traces"][sid] for n in who}
+        eps = replays[who[0]]["traces"][sid]
+        options = "".join(
+            f'<option value="{i}">episode {t["episode"]} (seed {t["seed"]})</option>'
+            for i, t in enumerate(eps)
+        )
+        b += [
+            f'<div class="replay" data-scenario="{_esc(sid)}">',
+            f"<h3>{_esc(sid)}</h3>",
+            '<div class="controls"><button type="button">play</button>'
+            f'<select aria-label="episode">{options}</select>'
+            '<input type="range" min="0" max="0" value="0" aria-label="step">'
+            '<span class="step"></span></div>',
+            '<div class="panes">',
+        ]
+        for n in who:
+            b.append(
+                f'<figure data-group="{_esc(group[n])}"><canvas width="320" height="320" '
+                f'data-entry="{_esc(n)}"></canvas><figcaption><strong>{_esc(names[n])}</strong>'
+                ' <span class="outcome"></span></figcaption></figure>'
+            )
+        b += ["</div></div>"]
+    blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).replace("</", "<\\/")
+    b.append(f'<script type="application/json" id="replay-data">{blob}</script>')
+    return b
+
+
 def render_html(
-    data: dict[str, Any], pub: Published, plots: dict[str, bytes], matplotlib_version: str
+    data: dict[str, Any],
+    pub: Published,
+    plots: dict[str, bytes],
+    matplotlib_version: str,
+    replays: dict[str, dict[str, Any]] | None = None,
 ) -> str:
-    ref = next(e["display_name"] for e in data["entries"] if e["name"] == data["reference"])
+    """The page; ``replays``: entry -> its replays file (those named by ``data["replays"]``)."""
+    ref = _names(data)[data["reference"]]
+    rk = data["ranking"]
+    filt = "".join(
+        f'<label><input type="checkbox" value="{g}" checked> {_esc(GROUP_LABEL.get(g, g))}</label>'
+        for g in data["groups"]
+    )
     b: list[str] = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -199,24 +590,63 @@ def render_html(
         f'<meta name="generator" content="{GENERATOR}; plots: matplotlib {matplotlib_version}">',
         "<title>cdr-bench leaderboard</title>",
         f"<style>{_CSS}</style></head><body>",
+        f'<div id="filter"><strong>Show:</strong> {filt}</div>',
         "<h1>cdr-bench leaderboard</h1>",
-        '<nav><a href="#measured">Measured here</a><a href="#entries">Entries</a>'
+        '<nav><a href="#ranking">Ranking</a><a href="#tactical">Tactical</a>'
+        '<a href="#replays">Replays</a><a href="#measured">Per scenario</a>'
+        '<a href="#plots">Plots</a><a href="#entries">Entries</a>'
         '<a href="#published">Published (paper)</a><a href="#side-by-side">Published vs '
-        'measured</a><a href="#plots">Plots</a></nav>',
-        f'<p class="note">{inline_md(INTRO.format(up=HIGHER, down=LOWER, ref=ref))} '
-        "Click a column header to sort.</p>",
-        '<h2 id="measured">Measured here</h2>',
+        "measured</a></nav>",
+        '<div class="conclusion" id="conclusion">',
+        *[f"<p>{inline_md(p)}</p>" for p in conclusion(data)],
+        "</div>",
+        f'<h2 id="ranking">Ranking: clean success on {_esc(rk["scenario"])}</h2>',
+    ]
+    head, rows, groups = ranking_table(data)
+    b += [
+        html_table("table-ranking", head, rows, groups=groups),
+        f'<p class="note">{inline_md(HEADLINE_NOTE.format(sc=rk["scenario"], down=LOWER))} '
+        "Click a column header to sort; tick the groups to show at the top.</p>",
+    ]
+    title, head, rows = table2_beside(pub, rk["scenario"])
+    b += [
+        '<section data-group="published">',
+        f"<h3>{_esc(title)}</h3>",
+        html_table("table-published-beside", head, rows, "published"),
+        "</section>",
+    ]
+    if data["tactical"]:
+        head, rows, groups = tactical_table(data)
+        b += [
+            '<h2 id="tactical">Tactical scenarios</h2>',
+            f'<p class="note">{inline_md(TACTICAL_NOTE)}</p>',
+            html_table("table-tactical", head, rows, groups=groups),
+        ]
+    b += _replay_html(data, replays or {})
+    b += [
+        '<h2 id="measured">Measured here, per scenario</h2>',
+        f'<p class="note">{inline_md(INTRO.format(up=HIGHER, down=LOWER, ref=ref))}</p>',
     ]
     for t in data["tables"]:
         head, rows = scenario_table(data, t)
+        fixed = " A fixed encounter: values without intervals." if t["fixed"] else ""
         b += [
             f'<h3 id="{_anchor(t["scenario"])}">{_esc(t["scenario"])}</h3>',
-            f'<p class="note">{_esc(t["description"])} — {t["episodes"]} episodes per entry.</p>',
-            html_table("table-" + _anchor(t["scenario"]), head, rows),
+            f'<p class="note">{_esc(t["description"])} — {t["episodes"]} episodes per '
+            f"entry.{fixed}</p>",
+            html_table("table-" + _anchor(t["scenario"]), head, rows, groups=_groups_of(data, t)),
         ]
-    head, rows = entries_table(data)
-    b += ['<h2 id="entries">Entries</h2>', html_table("table-entries", head, rows)]
+    b.append('<h2 id="plots">Plots</h2>')
+    for name, png in plots.items():
+        uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+        b.append(
+            f'<figure><img alt="{_esc(name)}" src="{uri}"><figcaption>{_esc(name)}'
+            "</figcaption></figure>"
+        )
+    head, rows, groups = entries_table(data)
+    b += ['<h2 id="entries">Entries</h2>', html_table("table-entries", head, rows, groups=groups)]
     b += [
+        '<section data-group="published">',
         '<h2 id="published">Published numbers (the paper; not measured here)</h2>',
         '<p class="note">Transcribed verbatim (rates in %). Claims from the paper\'s own '
         "simulator, shown as published and never ranked with the measured tables.</p>",
@@ -236,12 +666,5 @@ def render_html(
         b.append("<p>No entry names a published row yet.</p>")
     for i, (title, head, rows) in enumerate(sbs):
         b += [f"<h3>{_esc(title)}</h3>", html_table(f"table-side-{i}", head, rows)]
-    b.append('<h2 id="plots">Plots</h2>')
-    for name, png in plots.items():
-        uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
-        b.append(
-            f'<figure><img alt="{_esc(name)}" src="{uri}"><figcaption>{_esc(name)}'
-            "</figcaption></figure>"
-        )
-    b += [f"<script>{_JS}</script>", "</body></html>", ""]
+    b += ["</section>", f"<script>{_JS}</script>", "</body></html>", ""]
     return "\n".join(b)

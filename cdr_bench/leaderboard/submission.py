@@ -14,6 +14,11 @@ Example (``leaderboard/submissions/mvp.yaml``)::
     reference: agents/mvp/agent.py
     training: null
     scenarios: paper
+    replays: [tactical/head-on, tactical/crossing, tactical/overtaking]
+
+A learned entry also names its training logs (``training_logs``: one JSON-lines log per seed;
+the budget and seed columns and the learning curves are read from them) and, when it is an
+ablation of another entry, ``group: ablation``.
 
 Paths (``agent``, ``checkpoint``, a ``reference`` that is not a URL) are relative to the
 repository root, i.e. the folder holding ``leaderboard/``, and must stay inside it.
@@ -33,6 +38,9 @@ import yaml
 from cdr_bench.errors import UserError
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
+GROUPS = ("scripted", "learned", "ablation")
+"""Groups of measured entries, in display order (the paper's numbers are a fourth group,
+``published``, never measured here)."""
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
 """Checkpoint formats that load without unpickling arbitrary objects (``torch.load`` with
 ``weights_only=True``, safetensors, ``numpy.load`` with ``allow_pickle=False``)."""
@@ -75,6 +83,15 @@ class Submission:
     """Row of the paper's Table 2 (agent) or Table 3 (variant) this entry reproduces."""
     multimodality: tuple[str, ...]
     """Scenarios for ``cdr-bench multimodal`` (first-action distributions)."""
+    group: str = "scripted"
+    """One of :data:`GROUPS`: ``scripted`` (no training), ``learned`` or ``ablation``."""
+    training_logs: tuple[str, ...] = ()
+    """JSON-lines training logs (repository paths), one per seed; each ends in a ``final``
+    line whose ``step`` is the transitions trained."""
+    budget: tuple[int, int] | None = None
+    """Declared ``(transitions, seeds)`` of an entry whose logs are not in the repository."""
+    replays: tuple[str, ...] = ()
+    """Scenarios whose first episodes are recorded as trajectories and replayed on the page."""
 
 
 def _str(src: Path, field: str, v: Any, *, allow_none: bool = False) -> str | None:
@@ -160,6 +177,24 @@ FIELDS: dict[str, tuple[bool, str]] = {
         False,
         "scenarios on which `cdr-bench multimodal` maps the first-action distribution",
     ),
+    "group": (
+        False,
+        f"one of {', '.join(GROUPS)} (default: scripted without training, learned with it)",
+    ),
+    "training_logs": (
+        False,
+        "training logs (.jsonl, one per seed, each ending in a 'final' line): the budget and "
+        "seed columns and the learning curves come from them",
+    ),
+    "budget": (
+        False,
+        "{transitions: N, seeds: K}: declared budget of an entry whose training logs are not "
+        "in the repository (with training_logs: must agree with them)",
+    ),
+    "replays": (
+        False,
+        "scenarios whose first episodes are recorded and replayed side by side on index.html",
+    ),
 }
 """Every key of a submission file: ``name -> (required, meaning)``."""
 
@@ -243,6 +278,36 @@ def load_submission(
                 f"unknown row {published_as!r} (Table 2/3 rows: {', '.join(sorted(valid))})",
             )
 
+    group = _str(src, "group", data.get("group", "scripted" if training is None else "learned"))
+    if group not in GROUPS:
+        raise SubmissionError(src, "group", f"expected one of {', '.join(GROUPS)}, got {group!r}")
+    if group == "scripted" and training is not None:
+        raise SubmissionError(src, "group", "a scripted entry has no training command")
+    if group != "scripted" and training is None:
+        raise SubmissionError(src, "training", f"a {group} entry gives its training command")
+
+    logs = _str_list(src, "training_logs", data.get("training_logs", []), allow_empty=True)
+    for i, log in enumerate(logs):
+        full = _repo_path(src, f"training_logs[{i}]", log, root)
+        if not full.is_file() or full.suffix != ".jsonl":
+            raise SubmissionError(src, f"training_logs[{i}]", f"expected a .jsonl file, got {log}")
+    if len(set(logs)) != len(logs):
+        raise SubmissionError(src, "training_logs", f"a log is listed twice: {list(logs)}")
+    if logs and training is None:
+        raise SubmissionError(src, "training_logs", "a scripted entry has no training logs")
+    budget = _budget(src, data.get("budget"))
+    if budget is not None and training is None:
+        raise SubmissionError(src, "budget", "a scripted entry has no training budget")
+
+    replays = _str_list(src, "replays", data.get("replays", []), allow_empty=True)
+    for i, sc in enumerate(replays):
+        if sc not in scenarios:
+            raise SubmissionError(
+                src, f"replays[{i}]", f"{sc!r} is not one of this entry's scenarios"
+            )
+    if len(set(replays)) != len(replays):
+        raise SubmissionError(src, "replays", f"a scenario is listed twice: {list(replays)}")
+
     return Submission(
         name=name,
         source=src,
@@ -257,7 +322,23 @@ def load_submission(
         suite=suite,
         published_as=published_as,
         multimodality=multimodality,
+        group=group,
+        training_logs=logs,
+        budget=budget,
+        replays=replays,
     )
+
+
+def _budget(src: Path, v: Any) -> tuple[int, int] | None:
+    if v is None:
+        return None
+    if not isinstance(v, dict) or set(v) != {"transitions", "seeds"}:
+        raise SubmissionError(src, "budget", f"expected {{transitions: N, seeds: K}}, got {v!r}")
+    for k in ("transitions", "seeds"):
+        x = v[k]
+        if not isinstance(x, int) or isinstance(x, bool) or x < 1:
+            raise SubmissionError(src, f"budget.{k}", f"expected a positive integer, got {x!r}")
+    return (v["transitions"], v["seeds"])
 
 
 def load_submissions(

@@ -43,6 +43,11 @@ def multimodal_path(results_dir: Path, name: str, scenario: str) -> Path:
     return results_dir / f"{name}.multimodal-{scenario.replace('/', '_')}.json"
 
 
+def replays_path(results_dir: Path, name: str) -> Path:
+    """Recorded trajectories of the entry's ``replays`` scenarios (written by the scorer)."""
+    return results_dir / f"{name}.replays.json"
+
+
 def _read_json(path: Path) -> Any:
     try:
         return json.loads(path.read_text(encoding="utf-8"))

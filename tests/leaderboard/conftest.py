@@ -1,10 +1,12 @@
-"""A miniature repository with a leaderboard: two agents (``direct`` and a ``weave`` agent that
-turns toward its goal while alternating climbs and descents), their submissions, the published
-tables, and result files written once per session by the real ``build --evaluate`` (sandboxed
-subprocesses, 8 episodes per scenario)."""
+"""A miniature repository with a leaderboard: two agents (``direct``, scripted, and a ``weave``
+agent that turns toward its goal while alternating climbs and descents, declared learned with
+two fabricated training logs), their submissions (both replaying the tactical head-on family
+and its fixed encounter), the published tables, and result files written once per session by
+the real ``build --evaluate`` (sandboxed subprocesses, 8 episodes per scenario)."""
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -42,13 +44,17 @@ WEAVE_AGENT = textwrap.dedent(
 )
 
 
-def submission_yaml(agent: str, **extra: str) -> str:
+SCENARIOS = ("low", "high", "tactical/head-on", "tactical/head-on-fixed")
+REPLAYS = "[tactical/head-on, tactical/head-on-fixed]"
+
+
+def submission_yaml(agent: str, training: str = "null", **extra: str) -> str:
     lines = [
         f"agent: {agent}",
         "authors: [test]",
         "reference: https://example.org/paper",
-        "training: null",
-        "scenarios: [low, medium, tactical/head-on]",
+        f"training: {training}",
+        f"scenarios: [{', '.join(SCENARIOS)}]",
     ]
     lines += [f"{k}: {v}" for k, v in extra.items()]
     return "\n".join(lines) + "\n"
@@ -73,11 +79,27 @@ def make_repo(root: Path) -> Path:
     lb = root / "leaderboard"
     (lb / "submissions").mkdir(parents=True)
     shutil.copytree(ROOT / "leaderboard" / "published", lb / "published")
+    for seed in (1, 2):
+        log = [
+            {"step": 1000 * k, "charts/success_rolling": min(1.0, 0.1 * k + 0.05 * seed)}
+            for k in range(1, 11)
+        ]
+        log.append({"final": {"step": 10000, "wall_s": 1.0}})
+        (root / "agents" / "weave" / f"log-{seed}.jsonl").write_text(
+            "".join(json.dumps(r) + "\n" for r in log)
+        )
     (lb / "submissions" / "direct.yaml").write_text(
-        submission_yaml("agents/direct/agent.py", display_name="Direct")
+        submission_yaml("agents/direct/agent.py", display_name="Direct", replays=REPLAYS)
     )
     (lb / "submissions" / "weave.yaml").write_text(
-        submission_yaml("agents/weave", display_name="Weave", published_as="PPO")
+        submission_yaml(
+            "agents/weave",
+            training="python -m weave.train",
+            display_name="Weave",
+            published_as="PPO",
+            training_logs="[agents/weave/log-1.jsonl, agents/weave/log-2.jsonl]",
+            replays=REPLAYS,
+        )
     )
     return lb
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.leaderboard.conftest import EPISODES, cdr, snapshot, submission_yaml
+from tests.leaderboard.conftest import EPISODES, SCENARIOS, cdr, snapshot, submission_yaml
 
 
 def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
@@ -24,7 +24,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert after == before  # same bytes as the build that evaluated: a function of the results
 
     readme = (lb / "README.md").read_text()
-    for sid in ("low", "medium", "tactical/head-on"):
+    for sid in SCENARIOS:
         assert f"### {sid}" in readme
     data = json.loads((lb / "leaderboard.json").read_text())
     low = next(t for t in data["tables"] if t["scenario"] == "low")
@@ -37,11 +37,20 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
         "reference"
     )
     assert "Weave (reference)" in readme
-    # ranks follow the success rate
-    ranked = sorted(low["rows"], key=lambda r: r["rank"])
-    s = [r["metrics"]["success_rate"]["value"] for r in ranked]
-    assert s == sorted(s, reverse=True)
-    # the best value of a column is marked, in bold, on the row that holds it
+    # every table follows the ranking by the headline score (clean success on high)
+    rk = data["ranking"]
+    assert (rk["scenario"], rk["metric"]) == ("high", "clean_success_rate")
+    order = [r["entry"] for r in rk["rows"]]
+    for t in data["tables"]:
+        assert [r["entry"] for r in t["rows"]] == order
+    high = next(t for t in data["tables"] if t["scenario"] == "high")
+    heads = [r["metrics"]["clean_success_rate"]["value"] for r in high["rows"]]
+    if not rk["rows"][1]["tied_with_leader"]:
+        assert heads[0] > heads[1]
+    assert readme.index("## In one minute") < readme.index("## Ranking: clean success on high")
+    top = next(e["display_name"] for e in data["entries"] if e["name"] == rk["leader"])
+    assert f"**{top}** ranks first on the headline score" in readme
+    # the best value of a marked column is bold on the row that holds it; never on steps
     for key in ("success_rate", "los_rate"):
         for name in low["best"][key]:
             row = next(r for r in low["rows"] if r["entry"] == name)
@@ -52,14 +61,45 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
                 else (o["metrics"][key]["value"] >= v)
                 for o in low["rows"]
             )
-    assert "**" in readme
+    assert all(t["best"]["avg_steps_success"] == [] for t in data["tables"])
+    # budget and seeds from the training logs; a scripted entry has none
+    budget = {e["name"]: e["budget"] for e in data["entries"]}
+    assert budget["direct"] is None
+    assert budget["weave"] == {"transitions": 10000, "seeds": 2, "source": "training logs"}
+    assert "| 10,000 | 2 |" in readme
+    # the fixed encounter is one outcome, the family a rate with its interval
+    tac = {t["scenario"]: t for t in data["tactical"]}
+    assert tac["tactical/head-on-fixed"]["fixed"] and not tac["tactical/head-on"]["fixed"]
+    assert all(c["kind"] == "rate" for c in tac["tactical/head-on"]["cells"].values())
+    assert all(c["kind"] == "outcome" for c in tac["tactical/head-on-fixed"]["cells"].values())
+    # replays recorded by the scorer for both entries, one file each
+    assert data["replays"]["entries"] and sorted(data["replays"]["entries"]) == ["direct", "weave"]
+    rp = json.loads((lb / "results" / "weave.replays.json").read_text())
+    assert sorted(rp["traces"]) == ["tactical/head-on", "tactical/head-on-fixed"]
+    fixed = rp["traces"]["tactical/head-on-fixed"]
+    assert [t["episode"] for t in fixed] == [0, 1, 2]
+    first = next(
+        json.loads(x)
+        for x in (lb / "results" / "weave.jsonl").read_text().splitlines()
+        if '"scenario":"tactical/head-on-fixed"' in x
+    )
+    assert fixed[0]["seed"] == first["seed"]
+    assert fixed[0]["outcomes"][0] == first["aircraft"][0]["outcome"]
+    assert len(fixed[0]["frames"]) == first["steps"] + 1
 
-    # published numbers in their own section, and beside the entry that names them
-    measured, published = readme.split("## Published numbers", 1)
-    assert "| PPO | low | 100 |" in published and "PPO" not in measured.split("## Entries")[0]
-    assert "Weave — published as “PPO” (Table 2)" in published
+    # published numbers in their own sections, marked published, beside the entry that names
+    # them; never in a measured table
+    beside = re.search(
+        r"^### The paper's Table 2 on high — published.*?(?=^##)", readme, re.M | re.S
+    )
+    assert beside and "| PPO | high | 93.3 |" in beside.group(0)
+    paper = re.search(r"^## Published numbers.*?(?=^## Plots)", readme, re.M | re.S)
+    assert paper and "| PPO | low | 100 |" in paper.group(0)
+    ours = readme.replace(beside.group(0), "").replace(paper.group(0), "")
+    assert "| PPO |" not in ours and "93.3" not in ours
+    assert "Weave — published as “PPO” (Table 2)" in readme
     plots = {p.name for p in (lb / "plots").glob("*.png")}
-    assert {"success_rate.png", "success_vs_density.png", "latency.png"} <= plots
+    assert {"success_rate.png", "pareto.png", "learning_curves.png", "latency.png"} <= plots
     for p in plots:
         assert f"plots/{p}" in readme
     html = (lb / "index.html").read_text()
@@ -211,12 +251,7 @@ def test_build_refuses_results_on_other_episodes(repo: Path) -> None:
     r = cdr(
         "evaluate",
         "agents/direct/agent.py",
-        "--scenario",
-        "low",
-        "--scenario",
-        "medium",
-        "--scenario",
-        "tactical/head-on",
+        *[a for sid in SCENARIOS for a in ("--scenario", sid)],
         "--episodes",
         EPISODES,
         "--seed",

@@ -1,5 +1,7 @@
 """``index.html`` opened in headless Chromium: the script runs, every table renders with its rows,
-and sorting by a column (requested through the URL fragment) reorders the rows."""
+sorting by a column (requested through the URL fragment) reorders the rows, the group filter
+hides the unticked groups, and a screenshot shows a page that is not blank with every replay
+canvas drawn (the page marks each canvas it drew and where it sits; its pixels are checked)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import subprocess
 from html.parser import HTMLParser
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 CHROMIUM = next(
@@ -31,6 +34,7 @@ class Tables(HTMLParser):
         super().__init__()
         self.tables: dict[str, list[list[str]]] = {}
         self.body: dict[str, str | None] = {}
+        self.raw = ""
         self._table: str | None = None
         self._row: list[str] | None = None
         self._cell: list[str] | None = None
@@ -67,7 +71,10 @@ class Tables(HTMLParser):
             self._cell.append(data)
 
 
-def dump_dom(page: Path, fragment: str = "") -> Tables:
+WIDTH = 1400
+
+
+def chromium(page: Path, fragment: str, *args: str) -> str:
     assert CHROMIUM is not None
     r = subprocess.run(
         [
@@ -76,9 +83,11 @@ def dump_dom(page: Path, fragment: str = "") -> Tables:
             "--no-sandbox",
             "--disable-gpu",
             "--disable-dev-shm-usage",
+            "--hide-scrollbars",
+            "--force-device-scale-factor=1",
             f"--user-data-dir={page.parent / '.chromium-profile'}",
             "--virtual-time-budget=5000",
-            "--dump-dom",
+            *args,
             page.as_uri() + fragment,
         ],
         capture_output=True,
@@ -86,8 +95,13 @@ def dump_dom(page: Path, fragment: str = "") -> Tables:
         timeout=120,
     )
     assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout
+
+
+def dump_dom(page: Path, fragment: str = "") -> Tables:
     parser = Tables()
-    parser.feed(r.stdout)
+    parser.raw = chromium(page, fragment, f"--window-size={WIDTH},900", "--dump-dom")
+    parser.feed(parser.raw)
     return parser
 
 
@@ -116,3 +130,61 @@ def test_page_renders_its_tables_and_sorts(repo: Path) -> None:
         dom = dump_dom(page, f"#sort=table-scenario-low:3:{direction}")
         shown = [float(r[3].split("%")[0]) for r in dom.tables["table-scenario-low"]]
         assert shown == sorted((round(100 * v, 1) for v in los), reverse=rev)
+
+
+def test_group_filter_hides_unticked_groups(repo: Path) -> None:
+    page = repo / "leaderboard" / "index.html"
+    data = json.loads((repo / "leaderboard" / "leaderboard.json").read_text())
+    groups = {e["name"]: e["group"] for e in data["entries"]}
+    assert sorted(groups.values()) == ["learned", "scripted"]
+    dom = dump_dom(page)
+    assert dom.body.get("data-hidden") == "0"
+    dom = dump_dom(page, "#groups=learned")
+    assert dom.body.get("data-groups-shown") == "learned"
+    rows = re.findall(r'<tr data-group="(\w+)"( hidden="")?>', dom.raw)
+    assert rows and all(bool(h) == (g != "learned") for g, h in rows)
+    assert {g for g, h in rows if h} == {"scripted"}
+    # the paper's numbers are a group too: hidden with it, shown otherwise
+    sections = re.findall(r'<section data-group="published"( hidden="")?>', dom.raw)
+    assert sections and all(sections)
+    assert int(dom.body.get("data-hidden") or 0) == sum(1 for _, h in rows if h) + len(
+        sections
+    ) + sum(1 for g in re.findall(r'<figure data-group="(\w+)" hidden=""', dom.raw))
+
+
+def test_screenshot_is_not_blank_and_every_replay_draws(repo: Path, tmp_path: Path) -> None:
+    from PIL import Image
+
+    page = repo / "leaderboard" / "index.html"
+    data = json.loads((repo / "leaderboard" / "leaderboard.json").read_text())
+    rp = data["replays"]
+    traces = {
+        e: json.loads((repo / "leaderboard" / rp["files"][e]).read_text())["traces"]
+        for e in rp["entries"]
+    }
+    n_canvases = sum(1 for sid in rp["scenarios"] for e in rp["entries"] if sid in traces[e])
+    assert n_canvases == 4  # two entries side by side on two scenarios
+    dom = dump_dom(page)
+    assert dom.body.get("data-replay-drawn") == str(n_canvases)
+    rects = [
+        tuple(int(v) for v in m.split(","))
+        for m in re.findall(r'<canvas [^>]*data-rect="([0-9,]+)"', dom.raw)
+    ]
+    assert len(rects) == n_canvases
+    assert all(320 <= w <= 324 and 320 <= h <= 324 for _, _, w, h in rects), rects
+    height = max(y + h for _, y, _, h in rects) + 20
+    shot = tmp_path / "page.png"
+    chromium(page, "", f"--window-size={WIDTH},{height}", f"--screenshot={shot}")
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert img.shape == (height, WIDTH, 3)
+    # not blank: the top of the page (conclusion, ranking) has dark text on white
+    dark = int((img[:600].sum(axis=2) < 200).sum())
+    assert dark > 2000, f"only {dark} dark pixels at the top of the page: blank?"
+    level = np.array([(0, 114, 178), (230, 159, 0), (0, 158, 115)])  # Okabe-Ito level colours
+    for x, y, w, h in rects:
+        pane = img[y + 2 : y + h - 2, x + 2 : x + w - 2]
+        drawn = int((pane != 255).any(axis=2).sum())
+        assert drawn > 500, f"replay canvas at {x},{y} is (nearly) empty: {drawn} pixels"
+        # the ownship and the traffic are drawn in their level colours
+        hits = (pane[:, :, None, :] == level[None, None]).all(axis=3).sum()
+        assert hits > 20, f"replay canvas at {x},{y}: no aircraft drawn in a level colour"

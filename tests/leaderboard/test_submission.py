@@ -11,7 +11,7 @@ import pytest
 
 from cdr_bench.leaderboard.published import load_published
 from cdr_bench.leaderboard.submission import SubmissionError, load_submission, load_submissions
-from tests.leaderboard.conftest import ROOT, cdr, make_repo, submission_yaml
+from tests.leaderboard.conftest import ROOT, SCENARIOS, cdr, make_repo, submission_yaml
 
 GOOD = submission_yaml("agents/direct/agent.py")
 
@@ -30,7 +30,8 @@ def write(lb: Path, text: str, name: str = "entry") -> Path:
 def test_good_submission(lb: Path) -> None:
     s = load_submission(write(lb, GOOD), lb.parent)
     assert s.name == "entry" and s.agent == "agents/direct/agent.py"
-    assert s.scenarios == ("low", "medium", "tactical/head-on") and s.suite is None
+    assert s.scenarios == SCENARIOS and s.suite is None
+    assert s.group == "scripted" and s.training_logs == () and s.replays == ()
     assert s.authors == ("test",) and s.training is None and s.checkpoint is None
 
 
@@ -79,7 +80,7 @@ BAD = {
         "unknown",
     ),
     "unknown suite": (
-        GOOD.replace("[low, medium, tactical/head-on]", "atari"),
+        GOOD.replace(f"[{', '.join(SCENARIOS)}]", "atari"),
         "scenarios",
         "suite",
     ),
@@ -91,6 +92,29 @@ BAD = {
         "not one of this entry's scenarios",
     ),
     "not a mapping": ("- agent: x\n", "", "expected a mapping"),
+    "unknown group": (GOOD + "group: baseline\n", "group", "expected one of"),
+    "scripted with logs": (
+        GOOD + "training_logs: [agents/direct/agent.py]\n",
+        "training_logs[0]",
+        "expected a .jsonl file",
+    ),
+    "learned without training": (GOOD + "group: learned\n", "training", "training command"),
+    "budget shape": (
+        GOOD.replace("training: null", "training: python t.py") + "budget: {transitions: 5}\n",
+        "budget",
+        "expected {transitions: N, seeds: K}",
+    ),
+    "budget value": (
+        GOOD.replace("training: null", "training: python t.py")
+        + "budget: {transitions: 0, seeds: 1}\n",
+        "budget.transitions",
+        "positive integer",
+    ),
+    "replays elsewhere": (
+        GOOD + "replays: [tactical/crossing]\n",
+        "replays[0]",
+        "not one of this entry's scenarios",
+    ),
     "bad yaml": ("agent: [unclosed\n", "", "not valid YAML"),
 }
 
@@ -107,6 +131,18 @@ def test_bad_submission_names_file_and_field(lb: Path, case: str) -> None:
     assert msg.startswith(f"{p}: {field}: " if field else f"{p}: "), msg
     assert what in msg
     assert e.value.field == field
+
+
+def test_learned_submission_fields(lb: Path) -> None:
+    text = GOOD.replace("training: null", "training: python t.py") + (
+        "group: ablation\ntraining_logs: [agents/weave/log-1.jsonl]\n"
+        "budget: {transitions: 10000, seeds: 1}\nreplays: [tactical/head-on]\n"
+    )
+    s = load_submission(write(lb, text), lb.parent)
+    assert s.group == "ablation" and s.training_logs == ("agents/weave/log-1.jsonl",)
+    assert s.budget == (10000, 1) and s.replays == ("tactical/head-on",)
+    s = load_submission(write(lb, GOOD.replace("training: null", "training: x")), lb.parent)
+    assert s.group == "learned"  # the default with a training command
 
 
 def test_bad_file_name(lb: Path) -> None:
