@@ -92,6 +92,8 @@ def test_trained_checkpoint_with_agent_latency_and_multimodal(tmp_path):
         "agents/diffusion_ac",
         "--scenario",
         "curriculum/stage-01",
+        "--episodes",
+        "1",
         "--samples",
         "16",
         "--max-steps",
