@@ -12,7 +12,7 @@ the keys RLlib's action-masking module expects
 (``ray.rllib.examples.rl_modules.classes.action_masking_rlm.ActionMaskingTorchRLModule``:
 it takes ``log(action_mask)`` as logit offsets, hence float32). Spaces are declared for every
 possible agent, so one shared module serves them all (parameter sharing:
-``policy_mapping_fn=lambda agent_id, *a, **k: "shared"``); see ``examples/rllib_ppo_shared.py``.
+``policy_mapping_fn=lambda agent_id, *a, **k: "shared"``); see ``docs/tutorials/rllib_ppo.py``.
 
 Ray is imported by this module only; the env itself is the package's PettingZoo env.
 """

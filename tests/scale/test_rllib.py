@@ -1,8 +1,6 @@
-"""The RLlib adapter: RLlib's own env checker, the masking keys, a one-iteration PPO run."""
+"""The RLlib adapter: RLlib's own env checker and the masking keys."""
 
 from __future__ import annotations
-
-import importlib.util
 
 import numpy as np
 import pytest
@@ -10,8 +8,6 @@ import pytest
 pytest.importorskip("ray.rllib")
 
 from cdr_bench.scale.rllib_env import CDRMultiAgentEnv  # noqa: E402
-
-from .helpers import REPO  # noqa: E402
 
 
 def test_spaces_for_every_agent_and_mask_key():
@@ -44,12 +40,5 @@ def test_rllib_env_checker_accepts_it():
     check_multiagent_environments(CDRMultiAgentEnv({"scenario": "marl/low-2"}))
 
 
-@pytest.mark.slow
-def test_ppo_parameter_sharing_one_iteration(tmp_path):
-    spec = importlib.util.spec_from_file_location("ex", REPO / "examples" / "rllib_ppo_shared.py")
-    assert spec and spec.loader
-    ex = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ex)
-    rows = ex.train("marl/low-2", iterations=1, batch=128, minibatch=64, logdir=str(tmp_path))
-    assert rows[0]["env_steps"] and rows[0]["env_steps"] >= 128
-    assert (tmp_path / "result.json").is_file()
+# A PPO run with one shared policy: tests/test_docs_site.py::test_rllib_tutorial (the tutorial
+# docs/tutorials/rllib_ppo.py is the one RLlib training script).
