@@ -55,6 +55,12 @@ class Schedule:
         c0[1:] = abar_prev[1:].sqrt() * beta / (1 - abar_full[1:])
         ct[1:] = alpha.sqrt() * (1 - abar_prev[1:]) / (1 - abar_full[1:])
         self.coef_y0, self.coef_yt = c0.float(), ct.float()
+        # the same constants as Python floats (exactly the float32 values): scalar factors of
+        # the reverse step without indexing a tensor
+        self._reverse = [
+            (float(a), float(b), float(s))
+            for a, b, s in zip(self.coef_y0, self.coef_yt, self.beta_tilde.sqrt(), strict=True)
+        ]
 
     def q_sample(self, y0: torch.Tensor, t: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
         """Eq. 28/40: y_t = sqrt(abar_t) y0 + sqrt(1 - abar_t) eps; y0 (N, K), t (N,) long."""
@@ -64,6 +70,14 @@ class Schedule:
     def posterior_mean(self, y0_hat: torch.Tensor, yt: torch.Tensor, t: int) -> torch.Tensor:
         """Eq. 32: mean of p(y_{t-1} | y_t) for a scalar step t in 1..T."""
         return self.coef_y0[t] * y0_hat + self.coef_yt[t] * yt
+
+    def reverse_step(
+        self, y0_hat: torch.Tensor, yt: torch.Tensor, t: int, z: torch.Tensor
+    ) -> torch.Tensor:
+        """Eq. 31: y_{t-1} = mean + sqrt(beta_tilde_t) z for a scalar step t in 2..T (the
+        arithmetic of :meth:`posterior_mean` plus the noise term, with float factors)."""
+        c0, ct, s = self._reverse[t]
+        return (y0_hat * c0 + yt * ct) + z * s
 
 
 def masked_logits(logits: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

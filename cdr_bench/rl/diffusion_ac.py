@@ -19,8 +19,10 @@ from cdr_bench.rl.networks import (
     N_ACTIONS,
     CategoricalActor,
     Denoiser,
+    FlatParameters,
     LearnerParts,
     TwinCritic,
+    adam,
     frozen_copy,
     polyak_update,
 )
@@ -53,24 +55,23 @@ class Policy(torch.nn.Module):
         else:
             raise ValueError(f"unknown actor {cfg.actor!r}")
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def clean_logits(self, obs: torch.Tensor, generator: torch.Generator | None = None):
         """y0 for each state: the reverse chain y_T ~ N(0, I) -> y_0 (Eq. 31-32), (N, 27)."""
         if self.cfg.actor == "categorical":
             return self.net(obs)
         sch, n = self.schedule, obs.shape[0]
-        h = self.net.encode(obs)
+        c = self.net.condition(self.net.encode(obs), sch.T)  # shared by the T steps
         y = torch.randn(n, N_ACTIONS, generator=generator)
         for t in range(sch.T, 0, -1):
-            y0_hat = self.net.forward_h(h, y, torch.full((n,), t, dtype=torch.long))
+            y0_hat = self.net.denoise(c, y, t)
             if t == 1:  # alpha_bar_0 = 1: the mean is y0_hat and beta_tilde_1 = 0
                 return y0_hat
-            mean = sch.posterior_mean(y0_hat, y, t)
             z = torch.randn(n, N_ACTIONS, generator=generator)
-            y = mean + sch.beta_tilde[t].sqrt() * z
+            y = sch.reverse_step(y0_hat, y, t, z)
         return y  # pragma: no cover
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def act(
         self,
         obs: torch.Tensor,
@@ -149,8 +150,10 @@ class DiffusionAC(LearnerParts):
         self.policy = Policy(cfg)
         self.critic = TwinCritic(cfg.obs_dim, cfg.critic_width, twin=cfg.twin)
         self.critic_target: Any = frozen_copy(self.critic)
-        self.opt_actor = torch.optim.Adam(self.policy.parameters(), lr=ucfg.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=ucfg.lr_critic)
+        # one flat tensor per optimised module (after the target's copy)
+        self.flat_actor, self.flat_critic = FlatParameters(self.policy), FlatParameters(self.critic)
+        self.opt_actor = adam([self.flat_actor.flat], lr=ucfg.lr_actor)
+        self.opt_critic = adam([self.flat_critic.flat], lr=ucfg.lr_critic)
         self.explore, self.tau_schedule = explore, tau
         self.tau = 1.0
         """teacher temperature of :meth:`update`"""
@@ -192,7 +195,7 @@ class DiffusionAC(LearnerParts):
         loss_q = ((q1a - y) ** 2).mean()
         if self.cfg.twin:
             loss_q = loss_q + ((q2a - y) ** 2).mean()
-        self.opt_critic.zero_grad(set_to_none=True)
+        self.flat_critic.zero_grad()
         loss_q.backward()
         self.opt_critic.step()
         # (B) teacher (Eq. 37-38) with the updated critics held fixed.
@@ -200,7 +203,7 @@ class DiffusionAC(LearnerParts):
         stats = {"loss_q": loss_q.item(), "q_mean": q1a.mean().item()}
         loss_pi, actor_stats = self.actor_loss(obs, mask, p_star)
         stats.update(actor_stats)
-        self.opt_actor.zero_grad(set_to_none=True)
+        self.flat_actor.zero_grad()
         loss_pi.backward()
         self.opt_actor.step()
         # (E) Polyak averaging of the targets (Eq. 36).
@@ -232,15 +235,20 @@ class DiffusionAC(LearnerParts):
         t = torch.randint(1, sch.T + 1, (n,))
         yt = sch.q_sample(target, t, torch.randn_like(target))
         net = self.policy.net
-        h = net.encode(obs)
-        loss_diff = ((net.forward_h(h, yt, t) - target) ** 2).sum(-1).mean()
+        c = net.condition(net.encode(obs), sch.T)  # shared by both terms
+        ce = u.ce_input != "none" and u.ce_weight > 0
+        if ce:  # both terms in one pass of 2n rows
+            if u.ce_input == "y0":
+                y_ce, t_ce = y0, torch.zeros_like(t)
+            else:
+                y_ce, t_ce = torch.randn_like(y0), torch.full_like(t, sch.T)
+            pred, term = net.denoise(c, torch.cat([yt, y_ce]), torch.cat([t, t_ce])).split(n)
+        else:
+            pred = net.denoise(c, yt, t)
+        loss_diff = ((pred - target) ** 2).sum(-1).mean()
         loss_pi = loss_diff
         stats = {"loss_diff": loss_diff.item()}
-        if u.ce_input != "none" and u.ce_weight > 0:
-            if u.ce_input == "y0":
-                term = net.forward_h(h, y0, torch.zeros(n, dtype=torch.long))
-            else:
-                term = net.forward_h(h, torch.randn_like(y0), torch.full((n,), sch.T))
+        if ce:
             logp = torch.log_softmax(masked_logits(term, mask), -1)
             loss_ce = -(p_star * logp.masked_fill(mask == 0, 0.0)).sum(-1).mean()
             loss_pi = loss_pi + u.ce_weight * loss_ce

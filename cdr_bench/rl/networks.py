@@ -5,10 +5,14 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import asdict
-from typing import Any
+from typing import Any, NamedTuple
 
+import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
+
+from cdr_bench.rl import kernels
 
 N_ACTIONS = 27
 
@@ -21,6 +25,40 @@ def sinusoidal_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
     return torch.cat([ang.sin(), ang.cos()], dim=-1)
 
 
+def _tanh_softplus(x: torch.Tensor) -> torch.Tensor:
+    """tanh(softplus(x)) = n / (n + 2) with n = e^x (e^x + 2) (exact; e^x is capped at e^20, where
+    the ratio is 1 in float32): one exponential instead of exp, log1p and tanh."""
+    e = torch.exp(torch.clamp(x, max=20.0))
+    n = e.add(2.0).mul_(e)
+    return n.div_(n + 2.0)
+
+
+class _MishFunction(torch.autograd.Function):
+    """mish with its derivative tanh(sp) + x sigmoid(x) (1 - tanh(sp)^2) computed in the forward
+    pass (so the backward pass is one multiplication)."""
+
+    @staticmethod
+    def forward(ctx: Any, x: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        tt = _tanh_softplus(x)
+        ctx.save_for_backward(torch.addcmul(tt, x * torch.sigmoid(x), 1.0 - tt * tt))
+        return x * tt
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        (derivative,) = ctx.saved_tensors
+        return grad * derivative
+
+
+class Mish(nn.Module):
+    """mish(x) = x tanh(softplus(x)) (Misra 2019), as ``nn.Mish`` to float rounding and faster
+    on CPU (PyTorch's kernel evaluates exp, log1p and tanh per element, unvectorised here)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.requires_grad and torch.is_grad_enabled():
+            return _MishFunction.apply(x)
+        return x * _tanh_softplus(x)
+
+
 class StateEncoder(nn.Module):
     """Enc(s): a small MLP with LayerNorm and Mish (§4.2.1)."""
 
@@ -29,10 +67,10 @@ class StateEncoder(nn.Module):
         self.net = nn.Sequential(
             nn.Linear(obs_dim, width),
             nn.LayerNorm(width),
-            nn.Mish(),
+            Mish(),
             nn.Linear(width, width),
             nn.LayerNorm(width),
-            nn.Mish(),
+            Mish(),
         )
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
@@ -45,7 +83,7 @@ class ResidualBlock(nn.Module):
     def __init__(self, width: int):
         super().__init__()
         self.net = nn.Sequential(
-            nn.LayerNorm(width), nn.Linear(width, width), nn.Mish(), nn.Linear(width, width)
+            nn.LayerNorm(width), nn.Linear(width, width), Mish(), nn.Linear(width, width)
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -59,14 +97,21 @@ class Denoiser(nn.Module):
     size (§5.1.4): three tokens of width ``width`` -- state embedding Enc(s), sinusoidal step
     embedding, noisy-logit embedding -- mixed by one 8-head self-attention layer, then
     ``n_blocks`` residual blocks on their sum and a linear head.
+
+    Computed as that network, arranged for speed (the same function, to float rounding;
+    ``tests/rl/test_fast_training.py`` checks it against ``nn.MultiheadAttention``):
+    what depends only on the state (its token's query, key and value) or only on the step (the
+    step token for t = 0..T) is computed once per decision or update (:meth:`condition`) and
+    shared by the reverse steps or losses that use it (:meth:`denoise`), and since only the sum
+    of the three attention outputs is used, it is summed before the output projection.
     """
 
     def __init__(self, obs_dim: int, width: int = 128, n_blocks: int = 2, n_heads: int = 8):
         super().__init__()
         self.width = width
         self.enc = StateEncoder(obs_dim, width)
-        self.t_mlp = nn.Sequential(nn.Linear(width, width), nn.Mish(), nn.Linear(width, width))
-        self.y_mlp = nn.Sequential(nn.Linear(N_ACTIONS, width), nn.Mish(), nn.Linear(width, width))
+        self.t_mlp = nn.Sequential(nn.Linear(width, width), Mish(), nn.Linear(width, width))
+        self.y_mlp = nn.Sequential(nn.Linear(N_ACTIONS, width), Mish(), nn.Linear(width, width))
         self.attn_norm = nn.LayerNorm(width)
         self.attn = nn.MultiheadAttention(width, n_heads, batch_first=True)
         self.blocks = nn.Sequential(*[ResidualBlock(width) for _ in range(n_blocks)])
@@ -76,15 +121,97 @@ class Denoiser(nn.Module):
         """State embedding, reusable across the T reverse steps of one decision."""
         return self.enc(obs)
 
+    def _qkv(self, token: torch.Tensor) -> torch.Tensor:
+        """The attention's input projection of one token (..., W) -> (..., 3W): q, k, v."""
+        return F.linear(self.attn_norm(token), self.attn.in_proj_weight, self.attn.in_proj_bias)
+
+    def condition(self, h: torch.Tensor, max_t: int) -> Conditioning:
+        """What :meth:`denoise` needs of the state embedding h (N, W) and of the steps
+        0..``max_t``."""
+        te = self.t_mlp(sinusoidal_embedding(torch.arange(max_t + 1), self.width))
+        return Conditioning(h, self._qkv(h), te, self._qkv(te))
+
+    def denoise(self, c: Conditioning, yt: torch.Tensor, t: torch.Tensor | int) -> torch.Tensor:
+        """y0_hat for noisy logits yt (k N, 27) of the N conditioned states (row r is state
+        r mod N: k passes in one) at steps t ((k N,) long, or one int for every row)."""
+        n, n_states = yt.shape[0], c.h.shape[0]
+        ye = self.y_mlp(yt)
+        t_idx = np.full(n, t, np.int64) if isinstance(t, int) else t.numpy()
+        h_idx = np.arange(n, dtype=np.int64) % n_states
+        mixed = three_token_attention(
+            c.qkv_h, h_idx, c.qkv_t, t_idx, self._qkv(ye), self.attn.num_heads
+        )
+        h = c.h if n == n_states else c.h.repeat(n // n_states, 1)
+        out = F.linear(mixed, self.attn.out_proj.weight, 3.0 * self.attn.out_proj.bias)
+        return self.head(self.blocks(h + c.te[t] + ye + out))
+
     def forward_h(self, h: torch.Tensor, yt: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        te = self.t_mlp(sinusoidal_embedding(t, self.width))
-        tokens = torch.stack([h, te, self.y_mlp(yt)], dim=1)  # (N, 3, W)
-        x = self.attn_norm(tokens)
-        tokens = tokens + self.attn(x, x, x, need_weights=False)[0]
-        return self.head(self.blocks(tokens.sum(dim=1)))
+        return self.denoise(self.condition(h, int(t.max())), yt, t)
 
     def forward(self, obs: torch.Tensor, yt: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         return self.forward_h(self.encode(obs), yt, t)
+
+
+class Conditioning(NamedTuple):
+    """:meth:`Denoiser.condition`: the state embedding h (N, W) and its token's attention
+    projection (N, 3W); the step token te for t = 0..max_t (max_t + 1, W) and its projection."""
+
+    h: torch.Tensor
+    qkv_h: torch.Tensor
+    te: torch.Tensor
+    qkv_t: torch.Tensor
+
+
+class ThreeTokenAttention(torch.autograd.Function):
+    """The denoiser's attention over its three tokens, summed over the queries (before the
+    output projection), per row: the compiled loops of :mod:`cdr_bench.rl.kernels` instead of
+    a few dozen small tensor operations. Inputs: the [q | k | v] tables of the state token
+    (rows picked by ``idx0``), of the step token (rows ``idx1``) and of the noisy-logit token
+    (one row per output row), float32; output (N, W)."""
+
+    @staticmethod
+    def forward(ctx: Any, qkv0, idx0, qkv1, idx1, qkv2, heads):  # type: ignore[override]
+        qkv0, qkv1, qkv2 = (x.contiguous() for x in (qkv0, qkv1, qkv2))
+        n, w = qkv2.shape[0], qkv2.shape[1] // 3
+        out = np.empty((n, w), np.float32)
+        attn = np.empty((n, heads, 3, 3), np.float32)
+        arrays = [x.detach().numpy() for x in (qkv0, qkv1, qkv2)]
+        kernels.attention_forward(arrays[0], idx0, arrays[1], idx1, arrays[2], heads, out, attn)
+        ctx.save_for_backward(qkv0, qkv1, qkv2)
+        ctx.extra = (idx0, idx1, heads, attn)
+        return torch.from_numpy(out)
+
+    @staticmethod
+    def backward(ctx: Any, grad_out: torch.Tensor):  # type: ignore[override]
+        idx0, idx1, heads, attn = ctx.extra
+        arrays = [x.detach().numpy() for x in ctx.saved_tensors]
+        grads = [np.zeros_like(a) for a in arrays]
+        g = grad_out.contiguous().numpy()
+        kernels.attention_backward(
+            arrays[0], idx0, arrays[1], idx1, arrays[2], heads, attn, g, *grads
+        )
+        g0, g1, g2 = (torch.from_numpy(x) for x in grads)
+        return g0, None, g1, None, g2, None
+
+
+def three_token_attention(
+    qkv0: torch.Tensor,
+    idx0: np.ndarray,
+    qkv1: torch.Tensor,
+    idx1: np.ndarray,
+    qkv2: torch.Tensor,
+    heads: int,
+) -> torch.Tensor:
+    """:class:`ThreeTokenAttention`, without recording the backward pass when no gradient is
+    wanted (acting)."""
+    tables = (qkv0, qkv1, qkv2)
+    if torch.is_grad_enabled() and any(x.requires_grad for x in tables):
+        return ThreeTokenAttention.apply(qkv0, idx0, qkv1, idx1, qkv2, heads)
+    q0, q1, q2 = (x.detach().contiguous().numpy() for x in tables)
+    out = np.empty((q2.shape[0], q2.shape[1] // 3), np.float32)
+    attn = np.empty((q2.shape[0], heads, 3, 3), np.float32)
+    kernels.attention_forward(q0, idx0, q1, idx1, q2, heads, out, attn)
+    return torch.from_numpy(out)
 
 
 def mlp(inp: int, width: int, out: int, layers: int = 3) -> nn.Sequential:
@@ -98,20 +225,52 @@ def mlp(inp: int, width: int, out: int, layers: int = 3) -> nn.Sequential:
 
 
 class TwinCritic(nn.Module):
-    """Q_phi1, Q_phi2 (s, .) in R^27, three layers of width 128 each (Table 1)."""
+    """Q_phi1, Q_phi2 (s, .) in R^27, three layers of width 128 each (Table 1); one critic without
+    ``twin`` (then Q2 = Q1).
+
+    The critics are computed together: each layer's parameters stacked along a leading critic
+    dimension (``weight[l]`` (k, out, in), ``bias[l]`` (k, out)), the first layer one matrix
+    product for both (same input), the others one batched product. The same function and the
+    same initial weights as two separate :func:`mlp` (tests/rl/test_fast_training.py)."""
 
     def __init__(self, obs_dim: int, width: int = 128, twin: bool = True):
         super().__init__()
-        self.q1 = mlp(obs_dim, width, N_ACTIONS)
-        self.q2 = mlp(obs_dim, width, N_ACTIONS) if twin else None
+        self.twin = twin
+        nets = [mlp(obs_dim, width, N_ACTIONS) for _ in range(2 if twin else 1)]
+        layers = [[m for m in net if isinstance(m, nn.Linear)] for net in nets]
+        self.weight = nn.ParameterList(
+            [nn.Parameter(torch.stack([ls[i].weight.detach() for ls in layers])) for i in range(3)]
+        )
+        self.bias = nn.ParameterList(
+            [nn.Parameter(torch.stack([ls[i].bias.detach() for ls in layers])) for i in range(3)]
+        )
+
+    def q_all(self, obs: torch.Tensor) -> torch.Tensor:
+        """(k, N, 27): Q of each critic."""
+        w0, b0 = self.weight[0], self.bias[0]
+        k, width = w0.shape[0], w0.shape[1]
+        x = F.linear(obs, w0.reshape(k * width, -1), b0.reshape(k * width))
+        x = torch.relu(x).view(-1, k, width).transpose(0, 1)  # (k, N, width)
+        x = torch.relu(torch.baddbmm(self.bias[1].unsqueeze(1), x, self.weight[1].transpose(1, 2)))
+        return torch.baddbmm(self.bias[2].unsqueeze(1), x, self.weight[2].transpose(1, 2))
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        q1 = self.q1(obs)
-        return q1, (self.q2(obs) if self.q2 is not None else q1)
+        q = self.q_all(obs)
+        return q[0], q[-1]
 
     def min_q(self, obs: torch.Tensor) -> torch.Tensor:
-        q1, q2 = self(obs)
-        return torch.minimum(q1, q2)
+        q = self.q_all(obs)
+        return torch.minimum(q[0], q[-1])
+
+    def _load_from_state_dict(self, state_dict: dict, prefix: str, *args: Any) -> None:
+        # a state written before the critics were stacked: q1.0.weight, q1.2.weight, ...
+        if prefix + "q1.0.weight" in state_dict:
+            nets = ["q1", "q2"] if self.twin else ["q1"]
+            for i, layer in enumerate((0, 2, 4)):
+                for kind in ("weight", "bias"):
+                    parts = [state_dict.pop(f"{prefix}{q}.{layer}.{kind}") for q in nets]
+                    state_dict[f"{prefix}{kind}.{i}"] = torch.stack(parts)
+        super()._load_from_state_dict(state_dict, prefix, *args)
 
 
 class CategoricalActor(nn.Module):
@@ -130,8 +289,53 @@ class CategoricalActor(nn.Module):
 @torch.no_grad()
 def polyak_update(target: nn.Module, source: nn.Module, rho: float) -> None:
     """Eq. 36: target <- rho * source + (1 - rho) * target."""
-    for tp, sp in zip(target.parameters(), source.parameters(), strict=True):
-        tp.mul_(1.0 - rho).add_(sp, alpha=rho)
+    tps: list[torch.Tensor] = list(target.parameters())
+    sps: list[torch.Tensor] = list(source.parameters())
+    if len(tps) != len(sps):
+        raise ValueError("target and source have different parameters")
+    # one multi-tensor operation per step, the arithmetic of tp.mul_(1 - rho).add_(sp, rho)
+    torch._foreach_mul_(tps, 1.0 - rho)
+    torch._foreach_add_(tps, sps, alpha=rho)
+
+
+OPTIMIZER_FLAGS = ("fused", "foreach")
+
+
+class FlatParameters:
+    """The parameters of ``module`` made views of one flat tensor :attr:`flat`, and their
+    gradients views of ``flat.grad``: an optimiser of ``flat`` makes one step for all of them
+    (Adam is elementwise: the same update as per tensor), :meth:`zero_grad` is one fill and
+    :meth:`clip_grad_norm` one norm. Backward passes accumulate into the gradient views, so the
+    gradients are zeroed, never set to None, between updates."""
+
+    def __init__(self, module: nn.Module):
+        params = list(module.parameters())
+        with torch.no_grad():
+            self.flat = nn.Parameter(torch.cat([p.reshape(-1) for p in params]))
+        self.flat.grad = torch.zeros_like(self.flat)
+        offset = 0
+        for p in params:
+            n = p.numel()
+            p.data = self.flat.data[offset : offset + n].view_as(p)
+            p.grad = self.flat.grad[offset : offset + n].view_as(p)
+            offset += n
+
+    def zero_grad(self) -> None:
+        assert self.flat.grad is not None
+        self.flat.grad.zero_()
+
+    def clip_grad_norm(self, max_norm: float) -> None:
+        """``nn.utils.clip_grad_norm_`` (the global 2-norm of the gradients, scaled down to
+        ``max_norm`` if above) over the flat gradient."""
+        assert self.flat.grad is not None
+        norm = torch.linalg.vector_norm(self.flat.grad)
+        self.flat.grad.mul_(torch.clamp(max_norm / (norm + 1e-6), max=1.0))
+
+
+def adam(params: Any, **kw: Any) -> torch.optim.Adam:
+    """Adam with the fused CPU kernel (one call per step for all parameters instead of a
+    dozen small operations per parameter tensor; the same update rule)."""
+    return torch.optim.Adam(params, fused=True, **kw)
 
 
 def frozen_copy(module: nn.Module) -> nn.Module:
@@ -166,4 +370,11 @@ class LearnerParts:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         for name in self.PARTS:
-            getattr(self, name).load_state_dict(state[name])
+            part = getattr(self, name)
+            if isinstance(part, torch.optim.Optimizer):  # keep how this one computes its step
+                flags = [{k: g.get(k) for k in OPTIMIZER_FLAGS} for g in part.param_groups]
+                part.load_state_dict(state[name])
+                for g, f in zip(part.param_groups, flags, strict=True):
+                    g.update(f)
+            else:
+                part.load_state_dict(state[name])
