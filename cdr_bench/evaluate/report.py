@@ -266,7 +266,7 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     rows: Rows = []
     for r in rk["rows"]:
         e = ent[r["entry"]]
-        tied = " (tied with #1)" if r["tied_with_leader"] and r["rank"] > 1 else ""
+        tied = f" (tied with #{r['tied_with']})" if r.get("tied_with") else ""
         budget, seeds = fmt_budget(e["budget"])
         h, tb = r["headline"], r["tie_break"]
         rows.append(

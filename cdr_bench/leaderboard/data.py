@@ -17,8 +17,9 @@ them is not significant (95 % paired bootstrap interval contains 0) are statisti
 ordered by :data:`TIE_BREAK` (extra path flown by successful flights, lower first: among
 agents that succeed equally often, the one that detours less), except that an entry never
 ranks above a tied one whose score is significantly higher; the first of them is the
-leader. Every other entry is significantly below the top score; they follow by headline score,
-each row with the paired difference from the row above.
+leader. Every other entry is significantly below the top score, and the same rule ranks them,
+tier by tier (the best remaining score, the entries not significantly below it, by the
+tie-break); each row also shows the paired difference from the row above.
 
 **Best values** are marked only on metrics whose better value cannot come from failing
 (:data:`MARK_BEST`): never on steps, extra path, delay or manoeuvres (an agent that ends early
@@ -302,29 +303,46 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
         return math.inf if v is None else v
 
     by_score = sorted(entries, key=lambda e: (-head(e), e.name))
-    best = [e for e in by_score if head(e) == head(by_score[0])]  # the top score (co-leaders)
-    tied = best + [
-        e
-        for e in by_score[len(best) :]
-        if head(e) > -math.inf
-        and any(not paired.get(b, e, sid)[HEADLINE_METRIC]["significant"] for b in best)
-    ]
-    # by the tie-break, but never above a tied entry with a significantly higher score
-    left = sorted(tied, key=lambda e: (tie(e), -head(e), e.name))
-    tied = []
-    while left:
 
-        def beaten(e: Entry) -> bool:
-            return any(
-                head(o) > head(e) and paired.get(o, e, sid)[HEADLINE_METRIC]["significant"]
-                for o in left
-                if o is not e
-            )
+    def tier_of(remaining: list[Entry]) -> tuple[list[Entry], list[Entry]]:
+        """The remaining entries with the top score and those not significantly below one of
+        them, ordered by the tie-break but never above one with a significantly higher score;
+        and the top-score entries themselves."""
+        best = [e for e in remaining if head(e) == head(remaining[0])]
+        tied = best + [
+            e
+            for e in remaining[len(best) :]
+            if head(e) > -math.inf
+            and any(not paired.get(b, e, sid)[HEADLINE_METRIC]["significant"] for b in best)
+        ]
+        left = sorted(tied, key=lambda e: (tie(e), -head(e), e.name))
+        out = []
+        while left:
 
-        pick = next((e for e in left if not beaten(e)), left[0])
-        tied.append(pick)
-        left.remove(pick)
-    order = tied + [e for e in by_score if e not in tied]
+            def beaten(e: Entry) -> bool:
+                return any(
+                    head(o) > head(e) and paired.get(o, e, sid)[HEADLINE_METRIC]["significant"]
+                    for o in left
+                    if o is not e
+                )
+
+            pick = next((e for e in left if not beaten(e)), left[0])
+            out.append(pick)
+            left.remove(pick)
+        return out, best
+
+    order: list[Entry] = []
+    tiers: list[list[Entry]] = []
+    remaining = by_score
+    while remaining:
+        tier, top = tier_of(remaining)
+        if not tiers:
+            best = top
+        tiers.append(tier)
+        order += tier
+        remaining = [e for e in remaining if e not in tier]
+    tied = tiers[0]
+    first_of = {e.name: order.index(t[0]) + 1 for t in tiers for e in t if len(t) > 1}
     leader = order[0]
     rows = []
     for i, e in enumerate(order):
@@ -336,7 +354,7 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
                 "entry": e.name,
                 "group": e.sub.group,
                 "rank": i + 1,
-                "tied_with_leader": e in tied and len(tied) > 1,
+                "tied_with": first_of.get(e.name) if first_of.get(e.name) != i + 1 else None,
                 "headline": _metric(m.get(HEADLINE_METRIC)),
                 "tie_break": _metric(m.get(TIE_BREAK)),
                 "vs_above": above,
@@ -354,6 +372,7 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
         "tie_break": TIE_BREAK,
         "leader": leader.name,
         "tied": [e.name for e in tied],
+        "tiers": [[e.name for e in t] for t in tiers],
         "rows": rows,
         "top_score": [e.name for e in best],
         "runner_up": None if runner_up is None else runner_up.name,

@@ -65,7 +65,8 @@ HEADLINE_NOTE = (
     "the top score and those whose paired difference from one of them is not significant (95 % "
     "paired bootstrap on the same episodes) are statistically tied and ordered by extra path "
     "(km flown beyond the direct route by successful flights, lower first; never above a tied "
-    "entry with a significantly higher score); the others follow by headline score. "
+    "entry with a significantly higher score); the same rule then ranks the others, tier by "
+    "tier (#k in the rank column: tied with the entry ranked k). "
     '"vs row above": the paired difference from the entry ranked just above, in points, '
     "{down} when significant. Beside it the paper's five metrics on `{sc}` (success, LoS, NMAC, "
     "timeout, steps of successful episodes) and the training budget (transitions and seeds, "
@@ -166,10 +167,13 @@ def conclusion(data: dict[str, Any]) -> list[str]:
             ("significantly below", worse),
         ):
             if group:
-                parts.append(f"{len(group)} {label} it ({', '.join(names[g] for g in group)})")
+                verb = "is" if len(group) == 1 else "are"
+                who = ", ".join(names[g] for g in group)
+                parts.append(f"{len(group)} {verb} {label} it ({who})")
+        n_learned = f"{len(vs)} learned agent" + ("" if len(vs) == 1 else "s")
         out.append(
             f"Against {names[base]} (scripted resolver, rank {rows[base]['rank']}, "
-            f"{_pct(rows[base]['headline'])}), the {len(vs)} learned agents are "
+            f"{_pct(rows[base]['headline'])}), of the {n_learned} "
             + "; ".join(parts)
             + f". The best learned agent, {names[best['entry']]} (rank "
             f"{rows[best['entry']]['rank']}), differs from {names[base]} by {_pp(best)}."

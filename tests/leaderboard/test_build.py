@@ -45,7 +45,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
         assert [r["entry"] for r in t["rows"]] == order
     high = next(t for t in data["tables"] if t["scenario"] == "high")
     heads = [r["metrics"]["clean_success_rate"]["value"] for r in high["rows"]]
-    if not rk["rows"][1]["tied_with_leader"]:
+    if rk["rows"][1]["tied_with"] is None:
         assert heads[0] > heads[1]
     assert readme.index("## In one minute") < readme.index("## Ranking: clean success on high")
     top = next(e["display_name"] for e in data["entries"] if e["name"] == rk["leader"])

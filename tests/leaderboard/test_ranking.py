@@ -157,7 +157,9 @@ def test_ranked_by_headline_with_ties_broken_by_extra_path(data: dict[str, Any])
     assert order == ["alpha", "mvp", "beta", "direct", "random"]
     assert rk["tied"] == ["alpha", "mvp"]
     rows = {r["entry"]: r for r in rk["rows"]}
-    assert rows["mvp"]["tied_with_leader"] and not rows["beta"]["tied_with_leader"]
+    assert rows["mvp"]["tied_with"] == 1 and rows["alpha"]["tied_with"] is None
+    assert rk["tiers"] == [["alpha", "mvp"], ["beta"], ["direct"], ["random"]]
+    assert rows["beta"]["tied_with"] is None
     assert not rows["mvp"]["vs_above"]["significant"]
     assert rows["beta"]["vs_above"]["significant"] and rows["beta"]["vs_above"]["diff"] < 0
     assert rk["runner_up"] == "beta" and rk["gap"]["significant"]
@@ -191,8 +193,8 @@ def test_conclusion_names_leader_tie_significance_and_baseline(data: dict[str, A
         text
     )
     assert "against Mvp (95 % paired bootstrap" in text
-    assert "the 2 learned agents are 1 not significantly different from it (Alpha)" in text
-    assert "1 significantly below it (Beta)" in text
+    assert "of the 2 learned agents 1 is not significantly different from it (Alpha)" in text
+    assert "; 1 is significantly below it (Beta)" in text
     assert "Direct, which never manoeuvres, succeeds in 100.0%" in text
 
 
