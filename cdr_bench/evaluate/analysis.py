@@ -290,16 +290,12 @@ def multimodal(
     max_steps: int = 0,
     threshold: float = 0.05,
     out: str | os.PathLike[str] | None = None,
-    episodes: int = 1,
+    episodes: int = DEFAULT_EPISODES,
     search: bool = False,
 ) -> dict[str, Any]:
     """First-action distribution over ``episodes`` episodes (``samples`` each), its modes, the
     manoeuvre families each episode's successful samples reach (with ``search``, beside those
-    the search finds, docs/model.md §8.3) and (with ``out``) the JSON and heat map files.
-
-    ``episodes`` is 1 by default here, so that a caller of the single-episode analysis of
-    earlier versions keeps its cost (``samples`` rollouts); the command's default is
-    :data:`DEFAULT_EPISODES` episodes of :data:`DEFAULT_SAMPLES` samples."""
+    the search finds, docs/model.md §8.3) and (with ``out``) the JSON and heat map files."""
     if samples < 1 or episodes < 1:
         raise UserError("--samples and --episodes must be >= 1")
     _check_scenario(scenario)

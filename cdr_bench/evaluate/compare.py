@@ -51,9 +51,12 @@ _METRICS: dict[str, tuple[Any, Any]] = {
 }
 
 
-def _sums(episodes: list[dict[str, Any]], role: str) -> dict[str, NDArray[np.float64]]:
+def _sums(
+    episodes: list[dict[str, Any]], role: str, names: list[str]
+) -> dict[str, NDArray[np.float64]]:
     out = {}
-    for name, (num, den) in _METRICS.items():
+    for name in names:
+        num, den = _METRICS[name]
         nd = np.zeros((len(episodes), 2))
         for i, ep in enumerate(episodes):
             for ac in ep["aircraft"]:
@@ -77,9 +80,16 @@ def compare(
     path_a: str | os.PathLike[str],
     path_b: str | os.PathLike[str],
     scenarios: list[str] | None = None,
+    metrics: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Per-metric paired differences B - A on the scenarios both hold (or ``scenarios``);
-    :class:`UserError` if a compared scenario is not on the same episodes."""
+    """Per-metric paired differences B - A on the scenarios both hold (or ``scenarios``), for
+    every metric or those named in ``metrics`` (the same numbers either way: the resampled
+    episodes are drawn per scenario); :class:`UserError` if a compared scenario is not on the
+    same episodes."""
+    names = list(_METRICS) if metrics is None else list(dict.fromkeys(metrics))
+    unknown = [m for m in names if m not in _METRICS]
+    if unknown:
+        raise UserError(f"unknown metric(s) {unknown}; known: {', '.join(_METRICS)}")
     try:
         a, b = read_result(path_a), read_result(path_b)
     except ValueError as e:
@@ -131,8 +141,8 @@ def compare(
         for role in sa[sid]["metrics"]:
             if role not in sb[sid]["metrics"]:
                 continue
-            na, nb = _sums(xa, role), _sums(xb, role)
-            for name in _METRICS:
+            na, nb = _sums(xa, role, names), _sums(xb, role, names)
+            for name in names:
                 va, vb = float(_ratio(na[name])), float(_ratio(nb[name]))
                 diffs = _ratio(nb[name], idx) - _ratio(na[name], idx)
                 diffs = diffs[np.isfinite(diffs)]

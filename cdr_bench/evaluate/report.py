@@ -549,11 +549,15 @@ def action_label(a: int) -> str:
 
 
 def multimodality_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
-    """``cdr-bench multimodal`` results (``(label, its JSON)``): first-action samples."""
+    """``cdr-bench multimodal`` results (``(label, its JSON)``): first-action samples, and the
+    mean number of manoeuvre families (left, right, climb, descend, speed) per episode that the
+    successful samples reach, beside the mean the search finds (docs/model.md §10.4)."""
     head = [
         "agent",
         "scenario",
-        "samples",
+        "episodes x samples",
+        "families per episode",
+        "found by search",
         "follow-on success",
         "modes (successful)",
         "normalised entropy",
@@ -564,16 +568,20 @@ def multimodality_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
     for label, d in runs:
         counts = d["all"]
         top = sorted(range(len(counts)), key=lambda a: (-counts[a], a))[:3]
+        total = sum(counts) or 1
         tops = ", ".join(
-            f"{action_label(a)} ({100 * counts[a] / d['samples']:.0f} %)" for a in top if counts[a]
+            f"{action_label(a)} ({100 * counts[a] / total:.0f} %)" for a in top if counts[a]
         )
+        fam, found = d.get("families_mean"), d.get("feasible_families_mean")
         thr = d.get("threshold")
         ent = d.get("normalised_entropy")
         rows.append(
             [
                 Cell(label),
                 Cell(d["scenario"]),
-                Cell(str(d["samples"])),
+                Cell(f"{d.get('episodes', 1)} x {d['samples']}"),
+                Cell("-" if fam is None else f"{fam:.2f}"),
+                Cell("-" if found is None else f"{found:.2f}"),
                 Cell(fmt_value("rate", d["success_rate"])),
                 Cell(f"{d['modes']}" + ("" if thr is None else f" (≥ {100 * thr:g} %)")),
                 Cell("-" if ent is None else f"{ent:.3f}"),

@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.analysis import DEFAULT_EPISODES, DEFAULT_SAMPLES
 from cdr_bench.evaluate.loader import agent_files
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
@@ -79,7 +80,6 @@ from cdr_bench.leaderboard.submission import Submission, load_submissions
 
 PAPER_EPISODES = 1000
 BASE_SEED = 0
-MULTIMODAL_SAMPLES = 1000
 REPLAY_EPISODES = 3
 """Episodes recorded per replayed scenario (the first ones of the evaluation)."""
 PAGES = ("README.md", "index.html", "leaderboard.json")
@@ -265,7 +265,7 @@ def evaluate_submission(
         "hidden": [str(lb_dir)],
         "limits": {"cpu_s": limits.cpu_s, "memory_mb": limits.memory_mb, "wall_s": limits.wall_s},
         "multimodality": mm,
-        "samples": MULTIMODAL_SAMPLES,
+        "multimodal": {"episodes": DEFAULT_EPISODES, "samples": DEFAULT_SAMPLES},
         "replays": {
             "scenarios": list(sub.replays),
             "episodes": REPLAY_EPISODES,

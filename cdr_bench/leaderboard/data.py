@@ -265,6 +265,8 @@ class Paired:
         return out
 
     def get(self, a: Entry, b: Entry, sid: str) -> dict[str, dict[str, Any]]:
+        """The headline metric's difference b - a on ``sid`` (every metric if :meth:`all` of
+        the pair ran before)."""
         key = (a.name, b.name, sid)
         if key not in self._cache:
             back = self._cache.get((b.name, a.name, sid))
@@ -274,7 +276,7 @@ class Paired:
                     for m, r in back.items()
                 }
             else:
-                rows = compare(a.path, b.path, [sid])["rows"]
+                rows = compare(a.path, b.path, [sid], [HEADLINE_METRIC])["rows"]
                 self._cache[key] = {r["metric"]: r for r in rows if r["aircraft"] == "ownship"}
         return self._cache[key]
 
@@ -718,6 +720,10 @@ def build_data(
                 "entry": e.name,
                 "scenario": sc,
                 "samples": d["samples"],
+                "episodes": d.get("episodes", 1),
+                "families_mean": d.get("families_mean"),
+                "families_distribution": d.get("families_distribution"),
+                "feasible_families_mean": d.get("feasible_families_mean"),
                 "seed": d["seed"],
                 "threshold": d.get("threshold"),
                 "all": d["all"],

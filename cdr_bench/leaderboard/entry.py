@@ -51,7 +51,14 @@ def run(spec: dict[str, Any]) -> None:
     )
     for mm in spec["multimodality"]:
         multimodal(
-            spec["agent"], mm["scenario"], spec["samples"], spec["seed"], options, out=mm["out"]
+            spec["agent"],
+            mm["scenario"],
+            spec["multimodal"]["samples"],
+            spec["seed"],
+            options,
+            out=mm["out"],
+            episodes=spec["multimodal"]["episodes"],
+            search=True,
         )
     rp = spec.get("replays")
     if rp and rp["scenarios"]:

@@ -195,7 +195,7 @@ ABLATIONS = (
     "diffusion-ac-no-value-guidance",
 )
 """Diffusion-AC's Table-3 ablations, the complete method at the same budget first."""
-MULTIMODAL = ("diffusion-ac", "ppo")
+MULTIMODAL = ("diffusion-ac", "ppo", "ppo-sampled")
 DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
 """Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
 

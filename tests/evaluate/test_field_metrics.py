@@ -174,3 +174,17 @@ def test_traces_are_the_evaluated_episodes():
         x1, y1 = t["frames"][1]["c"][0][:2]
         assert 0 < math.hypot(x1 - x0, y1 - y0) <= 10.0  # one step of ~7 km
         assert t["dt_s"] == cfg.time.dt_s and t["los_km"] == cfg.separation.los_km
+
+
+def test_compare_of_chosen_metrics_equals_the_full_comparison():
+    from cdr_bench.errors import UserError
+    from cdr_bench.evaluate.compare import compare
+
+    res = AGENTS.parent / "leaderboard" / "results"
+    a, b = res / "mvp.json", res / "direct.json"
+    full = compare(a, b, ["high"])["rows"]
+    some = compare(a, b, ["high"], ["clean_success_rate", "extra_path_km"])["rows"]
+    assert [r["metric"] for r in some] == ["clean_success_rate", "extra_path_km"]
+    assert some == [r for r in full if r["metric"] in ("clean_success_rate", "extra_path_km")]
+    with pytest.raises(UserError, match="unknown metric"):
+        compare(a, b, ["high"], ["clean_sucess_rate"])
