@@ -199,10 +199,22 @@ MULTIMODAL = ("diffusion-ac", "ppo", "ppo-sampled")
 DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
 """Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
 
+
+def headline(repo: Repo) -> str:
+    """The leaderboard's generated conclusion and its ranking by the headline score, from the
+    committed ``leaderboard.json`` (the same functions as the leaderboard's pages)."""
+    from cdr_bench.leaderboard.render import conclusion
+
+    data = _read_json(repo.lb_dir / "leaderboard.json")
+    head, rows, _ = report.ranking_table(data)
+    return "\n\n".join([*conclusion(data), report.md_table(head, rows, numeric_from=3)])
+
+
 Block = Callable[[Repo], str]
 
 DOC_BLOCKS: dict[str, dict[str, Block]] = {
     "README.md": {
+        "headline": headline,
         "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
         "reference-agents": lambda r: measured(r, CLASSICAL, ci=False),
         "multimodality": lambda r: multimodality(r, MULTIMODAL),
