@@ -246,7 +246,17 @@ def intro(path: str) -> str:
     return "\n".join(lines[heads[0][0] + 1 : heads[1][0]]).strip()
 
 
-GENERATORS = {"env-card": env_card, "gymnasium-tasks": gymnasium_tasks}
+def scenario_fields() -> str:
+    from cdr_bench.docs import scenario_fields as fields
+
+    return fields()
+
+
+GENERATORS = {
+    "env-card": env_card,
+    "gymnasium-tasks": gymnasium_tasks,
+    "scenario-fields": scenario_fields,
+}
 INCLUDES = {"section": section, "intro": intro}
 
 

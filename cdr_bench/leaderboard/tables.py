@@ -275,9 +275,7 @@ def replace_blocks(text: str, bodies: dict[str, str], where: str = "") -> str:
 
 def rendered_docs(leaderboard_dir: str | os.PathLike[str]) -> dict[str, tuple[str, str]]:
     """Each file of :data:`DOC_BLOCKS` present in the repository holding ``leaderboard_dir``:
-    path relative to the repository -> (text on disk, text with every block rendered now).
-    The README's other blocks (the env card and the scenario fields, generated from the code,
-    not from result files) are :mod:`cdr_bench.docs`'s."""
+    path relative to the repository -> (text on disk, text with every block rendered now)."""
     repo = Repo(leaderboard_dir)
     out = {}
     for rel, blocks in DOC_BLOCKS.items():

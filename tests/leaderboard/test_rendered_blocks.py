@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from cdr_bench import docs
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import report
 from cdr_bench.leaderboard import tables
@@ -26,17 +25,14 @@ DOC_FILES = sorted(
 
 @pytest.mark.parametrize("rel", DOC_FILES)
 def test_every_marked_block_has_a_renderer(rel: str) -> None:
-    """No block can go stale unnoticed: each is rendered by tables.DOC_BLOCKS (checked below)
-    or, for the README's env card and scenario fields, by cdr_bench.docs (tests/test_docs.py)."""
+    """No block can go stale unnoticed: each is rendered by tables.DOC_BLOCKS (checked below)."""
     text = (ROOT / rel).read_text(encoding="utf-8")
     names = re.findall(r"<!-- ([a-z0-9-]+):start -->", text)
     assert len(names) == len(set(names)), f"{rel}: a block name is used twice"
     assert sorted(names) == sorted(tables.marked_blocks(text)), f"{rel}: unclosed block"
     known = set(tables.DOC_BLOCKS.get(rel, {}))
-    if rel == "README.md":
-        known |= set(docs.MARKERS)
     assert set(names) <= known, f"{rel}: blocks without a renderer: {set(names) - known}"
-    assert known - set(docs.MARKERS) <= set(names), f"{rel}: registered blocks missing"
+    assert known <= set(names), f"{rel}: registered blocks missing"
 
 
 def test_doc_blocks_are_what_the_committed_files_produce() -> None:
