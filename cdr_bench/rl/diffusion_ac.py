@@ -197,6 +197,7 @@ class DiffusionAC(LearnerParts):
             loss_q = loss_q + ((q2a - y) ** 2).mean()
         self.flat_critic.zero_grad()
         loss_q.backward()
+        self.flat_critic.collect_grad()
         self.opt_critic.step()
         # (B) teacher (Eq. 37-38) with the updated critics held fixed.
         p_star = self.teacher(obs, mask, tau)
@@ -205,6 +206,7 @@ class DiffusionAC(LearnerParts):
         stats.update(actor_stats)
         self.flat_actor.zero_grad()
         loss_pi.backward()
+        self.flat_actor.collect_grad()
         self.opt_actor.step()
         # (E) Polyak averaging of the targets (Eq. 36).
         polyak_update(self.critic_target, self.critic, u.polyak)

@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the trainers, where PyTorch's or numpy's small operations cost more
-than the arithmetic: the denoiser's three-token attention (forward and backward) and the
-prioritised replay's sum tree. Sequential loops in a fixed order: the same inputs give the same
+than the arithmetic: mish, the denoiser's three-token attention, Rainbow's noisy dueling head for
+the taken actions (forward and backward), the prioritised replay's sum tree and the n-step
+queues. Sequential loops in a fixed order: the same inputs give the same
 outputs bit for bit (on the same machine).
 """
 
@@ -9,6 +10,70 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+
+# --- mish --------------------------------------------------------------------------------
+#
+# mish(x) = x tanh(softplus(x)) = x n / (n + 2) with n = e^x (e^x + 2), in one pass, and its
+# derivative tanh(sp) + x sigmoid(x) (1 - tanh(sp)^2) = tt + 4 x e (e + 1) / (n + 2)^2. e^x is
+# Cephes' expf (a polynomial after reduction by ln 2, about 1 ulp), written so that the loop
+# vectorises; x is clamped to [-87, 20] for it (where tanh(softplus(x)) is 0 or 1 in float32).
+
+_LOG2E = np.float32(1.4426950408889634)
+_LN2_HI = np.float32(0.693359375)
+_LN2_LO = np.float32(-2.12194440e-4)
+_EXP_P = (
+    np.float32(1.9875691500e-4),
+    np.float32(1.3981999507e-3),
+    np.float32(8.3334519073e-3),
+    np.float32(4.1665795894e-2),
+    np.float32(1.6666665459e-1),
+    np.float32(5.0000001201e-1),
+)
+
+
+@njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _exp_parts(x: NDArray[np.float32], mant: NDArray[np.float32], bits: NDArray[np.int32]) -> None:
+    """e^x = mant * (the float32 whose bits are ``bits``) = p(r) 2^k, x clamped to [-87, 20]."""
+    p0, p1, p2, p3, p4, p5 = _EXP_P
+    for i in range(x.size):
+        v = min(max(x[i], np.float32(-87.0)), np.float32(20.0))
+        k = np.floor(v * _LOG2E + np.float32(0.5))
+        r = v - k * _LN2_HI - k * _LN2_LO
+        p = ((((p0 * r + p1) * r + p2) * r + p3) * r + p4) * r + p5
+        mant[i] = p * r * r + r + np.float32(1.0)
+        bits[i] = (np.int32(k) + np.int32(127)) << np.int32(23)
+
+
+@njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def mish_forward(x: NDArray[np.float32], y: NDArray[np.float32]) -> None:
+    """y = mish(x) (1-D arrays)."""
+    bits = np.empty(x.size, np.int32)
+    _exp_parts(x, y, bits)
+    scale = bits.view(np.float32)
+    for i in range(x.size):
+        e = y[i] * scale[i]
+        s = (e + np.float32(1.0)) * (e + np.float32(1.0))
+        y[i] = x[i] * ((s - np.float32(1.0)) / (s + np.float32(1.0)))
+
+
+@njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def mish_forward_derivative(
+    x: NDArray[np.float32], y: NDArray[np.float32], d: NDArray[np.float32]
+) -> None:
+    """y = mish(x) and d = mish'(x) (1-D arrays)."""
+    bits = np.empty(x.size, np.int32)
+    _exp_parts(x, y, bits)
+    scale = bits.view(np.float32)
+    for i in range(x.size):
+        v = x[i]
+        e = y[i] * scale[i]
+        e1 = e + np.float32(1.0)
+        s = e1 * e1
+        m = s + np.float32(1.0)
+        tt = (s - np.float32(1.0)) / m
+        y[i] = v * tt
+        d[i] = tt + np.float32(4.0) * v * e * e1 / (m * m)
+
 
 # --- three-token attention, summed over the queries ------------------------------------------
 #
@@ -132,3 +197,227 @@ def attention_backward(
                 g0[ko + e] += ds[0, 0] * q0 + ds[1, 0] * q1 + ds[2, 0] * q2
                 g1[ko + e] += ds[0, 1] * q0 + ds[1, 1] * q1 + ds[2, 1] * q2
                 g2[ko + e] += ds[0, 2] * q0 + ds[1, 2] * q1 + ds[2, 2] * q2
+
+
+# --- the prioritised replay's sum tree --------------------------------------------------------
+#
+# Node i has children 2i and 2i + 1; leaf j is node n_leaves + j. The same arithmetic as the
+# level-by-level numpy version it replaces (every sum is recomputed from its two children, a
+# repeated leaf keeps its last value), so the same tree and the same draws bit for bit.
+
+
+@njit(cache=True)
+def sum_tree_update(
+    tree: NDArray[np.float64], n_leaves: int, idx: NDArray[np.int64], value: NDArray[np.float64]
+) -> None:
+    for i in range(len(idx)):
+        node = idx[i] + n_leaves
+        tree[node] = value[i]
+        node //= 2
+        while node >= 1:
+            tree[node] = tree[2 * node] + tree[2 * node + 1]
+            node //= 2
+
+
+@njit(cache=True)
+def sum_tree_find(
+    tree: NDArray[np.float64], n_leaves: int, prefix: NDArray[np.float64], out: NDArray[np.int64]
+) -> None:
+    """Leaf j with cumsum(leaves)[j-1] <= prefix < cumsum(leaves)[j], per prefix. Level by
+    level for all prefixes (their memory reads overlap)."""
+    u = prefix.copy()
+    node = np.ones(len(prefix), np.int64)
+    level = 1
+    while level < n_leaves:
+        for i in range(len(prefix)):
+            left = 2 * node[i]
+            if u[i] >= tree[left]:
+                u[i] = u[i] - tree[left]
+                node[i] = left + 1
+            else:
+                node[i] = left
+        level *= 2
+    for i in range(len(prefix)):
+        out[i] = node[i] - n_leaves
+
+
+# --- n-step returns ---------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def n_step_push(
+    slots: NDArray[np.int64],
+    obs: NDArray[np.float32],
+    mask: NDArray[np.int8],
+    action: NDArray[np.int64],
+    rewards: NDArray[np.float32],
+    ended: NDArray[np.bool_],
+    q_obs: NDArray[np.float32],
+    q_mask: NDArray[np.int8],
+    q_action: NDArray[np.int64],
+    q_rewards: NDArray[np.float32],
+    q_start: NDArray[np.int64],
+    q_len: NDArray[np.int64],
+    gamma_pow: NDArray[np.float32],
+    out_src: NDArray[np.int64],
+    out_row: NDArray[np.int64],
+    out_obs: NDArray[np.float32],
+    out_mask: NDArray[np.int8],
+    out_action: NDArray[np.int64],
+    out_rewards: NDArray[np.float32],
+    out_discount: NDArray[np.float32],
+) -> int:
+    """One step of the aircraft in ``slots`` (row i is slot ``slots[i]``) into per-slot queues
+    of length n (ring buffers: ``q_start``, ``q_len``); returns how many n-step transitions
+    completed, in order, with the row ``out_row`` whose next state closes each. The returns sum
+    the rewards as float32 from the oldest: R = sum_k float32(gamma^k) r_k."""
+    n = q_obs.shape[1]
+    m = 0
+    for i in range(len(slots)):
+        s = slots[i]
+        tail = (q_start[s] + q_len[s]) % n
+        q_obs[s, tail] = obs[i]
+        q_mask[s, tail] = mask[i]
+        q_action[s, tail] = action[i]
+        q_rewards[s, tail] = rewards[i]
+        q_len[s] += 1
+        emit = 1 if q_len[s] == n else 0
+        if ended[i]:
+            emit = q_len[s]
+        for _ in range(emit):
+            length = q_len[s]
+            head = q_start[s]
+            out_src[m] = s * n + head
+            out_row[m] = i
+            out_obs[m] = q_obs[s, head]
+            out_mask[m] = q_mask[s, head]
+            out_action[m] = q_action[s, head]
+            for j in range(rewards.shape[1]):
+                acc = np.float32(0.0)
+                for k in range(length):
+                    acc += gamma_pow[k] * q_rewards[s, (head + k) % n, j]
+                out_rewards[m, j] = acc
+            out_discount[m] = gamma_pow[length]
+            q_start[s] = (head + 1) % n
+            q_len[s] = length - 1
+            m += 1
+        if q_len[s] == 0:
+            q_start[s] = 0
+    return m
+
+
+# --- Rainbow's noisy dueling head for one action per sample -----------------------------------
+#
+# The advantage stream's noisy output layer: W = mu + sigma * (eps_out eps_in^T), b = mu_b +
+# sigma_b * eps_out, 27 blocks of K rows (one per action). The loss needs, per sample, the K
+# logits of one action minus the mean over actions: d[n] = (W h_n + b)[block a_n] -
+# mean_a (W h_n + b)[block a], and for a linear layer the mean over actions is the layer with
+# the mean weights. Computed without forming W; the backward pass writes the gradients of mu,
+# sigma (dense: the mean reaches every block) and h.
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def noisy_head_forward(
+    h: NDArray[np.float32],
+    mu: NDArray[np.float32],
+    sigma: NDArray[np.float32],
+    mu_b: NDArray[np.float32],
+    sigma_b: NDArray[np.float32],
+    eps_in: NDArray[np.float32],
+    eps_out: NDArray[np.float32],
+    actions: NDArray[np.int64],
+    k: int,
+    out: NDArray[np.float32],
+    w_mean: NDArray[np.float32],
+    b_mean: NDArray[np.float32],
+) -> None:
+    """``out`` (N, K) = taken-action logits minus the mean over actions; ``w_mean`` (K, I),
+    ``b_mean`` (K,) are written (kept for the backward pass)."""
+    n_rows, width = h.shape
+    n_blocks = mu.shape[0] // k
+    inv = np.float32(1.0 / n_blocks)
+    w_mean[:] = 0.0
+    b_mean[:] = 0.0
+    for o in range(mu.shape[0]):
+        j = o % k
+        eo = eps_out[o]
+        m, sg, wm = mu[o], sigma[o], w_mean[j]
+        for i in range(width):
+            wm[i] += m[i] + sg[i] * (eo * eps_in[i])
+        b_mean[j] += mu_b[o] + sigma_b[o] * eo
+    for j in range(k):
+        for i in range(width):
+            w_mean[j, i] *= inv
+        b_mean[j] *= inv
+    for n in range(n_rows):
+        base = actions[n] * k
+        hn = h[n]
+        for j in range(k):
+            o = base + j
+            eo = eps_out[o]
+            m, sg, wm = mu[o], sigma[o], w_mean[j]
+            acc = np.float32(0.0)
+            for i in range(width):
+                acc += (m[i] + sg[i] * (eo * eps_in[i]) - wm[i]) * hn[i]
+            out[n, j] = acc + (mu_b[o] + sigma_b[o] * eo - b_mean[j])
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def noisy_head_backward(
+    h: NDArray[np.float32],
+    mu: NDArray[np.float32],
+    sigma: NDArray[np.float32],
+    eps_in: NDArray[np.float32],
+    eps_out: NDArray[np.float32],
+    actions: NDArray[np.int64],
+    k: int,
+    w_mean: NDArray[np.float32],
+    grad_out: NDArray[np.float32],
+    grad_h: NDArray[np.float32],
+    grad_mu: NDArray[np.float32],
+    grad_sigma: NDArray[np.float32],
+    grad_mu_b: NDArray[np.float32],
+    grad_sigma_b: NDArray[np.float32],
+) -> None:
+    """Writes every gradient (no zeroing needed)."""
+    n_rows, width = h.shape
+    n_out = mu.shape[0]
+    inv = np.float32(1.0 / (n_out // k))
+    # the mean over actions: every block gets -1/27 sum_n g_n h_n^T
+    g_mean = np.zeros((k, width), np.float32)
+    gb_mean = np.zeros(k, np.float32)
+    for n in range(n_rows):
+        hn = h[n]
+        for j in range(k):
+            g = grad_out[n, j]
+            gb_mean[j] += g
+            row = g_mean[j]
+            for i in range(width):
+                row[i] += g * hn[i]
+    for o in range(n_out):
+        src, dst = g_mean[o % k], grad_mu[o]
+        for i in range(width):
+            dst[i] = -inv * src[i]
+        grad_mu_b[o] = -inv * gb_mean[o % k]
+    # the taken action's rows; the input's gradient
+    for n in range(n_rows):
+        base = actions[n] * k
+        hn, gh = h[n], grad_h[n]
+        gh[:] = 0.0
+        for j in range(k):
+            o = base + j
+            g = grad_out[n, j]
+            eo = eps_out[o]
+            grad_mu_b[o] += g
+            gm, m, sg, wm = grad_mu[o], mu[o], sigma[o], w_mean[j]
+            for i in range(width):
+                gm[i] += g * hn[i]
+            for i in range(width):
+                gh[i] += g * (m[i] + sg[i] * (eo * eps_in[i]) - wm[i])
+    # sigma's gradient: that of the composed weight times its noise
+    for o in range(n_out):
+        eo = eps_out[o]
+        src, dst = grad_mu[o], grad_sigma[o]
+        for i in range(width):
+            dst[i] = src[i] * (eo * eps_in[i])
+        grad_sigma_b[o] = grad_mu_b[o] * eo

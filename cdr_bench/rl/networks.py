@@ -25,23 +25,17 @@ def sinusoidal_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
     return torch.cat([ang.sin(), ang.cos()], dim=-1)
 
 
-def _tanh_softplus(x: torch.Tensor) -> torch.Tensor:
-    """tanh(softplus(x)) = n / (n + 2) with n = e^x (e^x + 2) (exact; e^x is capped at e^20, where
-    the ratio is 1 in float32): one exponential instead of exp, log1p and tanh."""
-    e = torch.exp(torch.clamp(x, max=20.0))
-    n = e.add(2.0).mul_(e)
-    return n.div_(n + 2.0)
-
-
 class _MishFunction(torch.autograd.Function):
-    """mish with its derivative tanh(sp) + x sigmoid(x) (1 - tanh(sp)^2) computed in the forward
-    pass (so the backward pass is one multiplication)."""
+    """mish, its derivative computed in the same pass (so the backward pass is one
+    multiplication)."""
 
     @staticmethod
     def forward(ctx: Any, x: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
-        tt = _tanh_softplus(x)
-        ctx.save_for_backward(torch.addcmul(tt, x * torch.sigmoid(x), 1.0 - tt * tt))
-        return x * tt
+        xs = x.detach().contiguous().numpy().reshape(-1)
+        y, d = np.empty_like(xs), np.empty_like(xs)
+        kernels.mish_forward_derivative(xs, y, d)
+        ctx.save_for_backward(torch.from_numpy(d).view(x.shape))
+        return torch.from_numpy(y).view(x.shape)
 
     @staticmethod
     def backward(ctx: Any, grad: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
@@ -50,13 +44,17 @@ class _MishFunction(torch.autograd.Function):
 
 
 class Mish(nn.Module):
-    """mish(x) = x tanh(softplus(x)) (Misra 2019), as ``nn.Mish`` to float rounding and faster
-    on CPU (PyTorch's kernel evaluates exp, log1p and tanh per element, unvectorised here)."""
+    """mish(x) = x tanh(softplus(x)) (Misra 2019), as ``nn.Mish`` to float rounding, in one
+    compiled pass (:func:`cdr_bench.rl.kernels.mish_forward`; PyTorch's kernel evaluates exp,
+    log1p and tanh per element, unvectorised on this CPU). float32."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if x.requires_grad and torch.is_grad_enabled():
             return _MishFunction.apply(x)
-        return x * _tanh_softplus(x)
+        xs = x.detach().contiguous().numpy().reshape(-1)
+        y = np.empty_like(xs)
+        kernels.mish_forward(xs, y)
+        return torch.from_numpy(y).view(x.shape)
 
 
 class StateEncoder(nn.Module):
@@ -293,43 +291,47 @@ def polyak_update(target: nn.Module, source: nn.Module, rho: float) -> None:
     sps: list[torch.Tensor] = list(source.parameters())
     if len(tps) != len(sps):
         raise ValueError("target and source have different parameters")
-    # one multi-tensor operation per step, the arithmetic of tp.mul_(1 - rho).add_(sp, rho)
-    torch._foreach_mul_(tps, 1.0 - rho)
-    torch._foreach_add_(tps, sps, alpha=rho)
+    # one multi-tensor operation, one pass: tp + rho (sp - tp)
+    torch._foreach_lerp_(tps, sps, rho)
 
 
 OPTIMIZER_FLAGS = ("fused", "foreach")
 
 
 class FlatParameters:
-    """The parameters of ``module`` made views of one flat tensor :attr:`flat`, and their
-    gradients views of ``flat.grad``: an optimiser of ``flat`` makes one step for all of them
-    (Adam is elementwise: the same update as per tensor), :meth:`zero_grad` is one fill and
-    :meth:`clip_grad_norm` one norm. Backward passes accumulate into the gradient views, so the
-    gradients are zeroed, never set to None, between updates."""
+    """The parameters of ``module`` made views of one flat tensor :attr:`flat`: an optimiser of
+    ``flat`` makes one step for all of them (Adam is elementwise: the same update as per tensor)
+    and :meth:`clip_grad_norm` is one norm. Between :meth:`zero_grad` (the parameters' gradients
+    set to None, so that the backward pass hands its gradient tensors over without copying) and
+    the step, :meth:`collect_grad` copies the gradients into ``flat.grad`` in one operation."""
 
     def __init__(self, module: nn.Module):
-        params = list(module.parameters())
+        self.params = list(module.parameters())
         with torch.no_grad():
-            self.flat = nn.Parameter(torch.cat([p.reshape(-1) for p in params]))
+            self.flat = nn.Parameter(torch.cat([p.reshape(-1) for p in self.params]))
         self.flat.grad = torch.zeros_like(self.flat)
         offset = 0
-        for p in params:
+        for p in self.params:
             n = p.numel()
             p.data = self.flat.data[offset : offset + n].view_as(p)
-            p.grad = self.flat.grad[offset : offset + n].view_as(p)
             offset += n
 
     def zero_grad(self) -> None:
-        assert self.flat.grad is not None
-        self.flat.grad.zero_()
+        for p in self.params:
+            p.grad = None
+
+    def collect_grad(self) -> None:
+        """``flat.grad`` <- the parameters' gradients (0 where a parameter has none)."""
+        grads = [p.grad if p.grad is not None else torch.zeros_like(p) for p in self.params]
+        torch.cat([g.reshape(-1) for g in grads], out=self.flat.grad)
 
     def clip_grad_norm(self, max_norm: float) -> None:
         """``nn.utils.clip_grad_norm_`` (the global 2-norm of the gradients, scaled down to
-        ``max_norm`` if above) over the flat gradient."""
+        ``max_norm`` if above) over ``flat.grad``."""
         assert self.flat.grad is not None
-        norm = torch.linalg.vector_norm(self.flat.grad)
-        self.flat.grad.mul_(torch.clamp(max_norm / (norm + 1e-6), max=1.0))
+        coef = max_norm / (float(torch.linalg.vector_norm(self.flat.grad)) + 1e-6)
+        if coef < 1.0:  # (a factor clamped at 1 leaves the gradient as it is)
+            self.flat.grad.mul_(coef)
 
 
 def adam(params: Any, **kw: Any) -> torch.optim.Adam:

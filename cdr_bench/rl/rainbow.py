@@ -27,13 +27,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from cdr_bench.rl.networks import N_ACTIONS, LearnerParts, frozen_copy, polyak_update
+from cdr_bench.rl import kernels
+from cdr_bench.rl.networks import (
+    N_ACTIONS,
+    FlatParameters,
+    LearnerParts,
+    adam,
+    frozen_copy,
+    polyak_update,
+)
 
 
 class NoisyLinear(nn.Module):
@@ -43,8 +52,8 @@ class NoisyLinear(nn.Module):
     sigma = sigma0 / sqrt(p) with p inputs. In ``eval()`` mode the noise is off (y = mu_w x + mu_b).
     """
 
-    weight_epsilon: torch.Tensor
     bias_epsilon: torch.Tensor
+    input_epsilon: torch.Tensor
 
     def __init__(self, in_features: int, out_features: int, sigma0: float = 0.5):
         super().__init__()
@@ -56,27 +65,51 @@ class NoisyLinear(nn.Module):
         self.bias_mu = nn.Parameter(torch.empty(out_features).uniform_(-bound, bound))
         self.weight_sigma = nn.Parameter(torch.full((out_features, in_features), sigma0 * bound))
         self.bias_sigma = nn.Parameter(torch.full((out_features,), sigma0 * bound))
-        # Noise is not part of the state dict (the shipped checkpoint holds only parameters).
-        self.register_buffer("weight_epsilon", torch.zeros(out_features, in_features), False)
+        # Noise is not part of the state dict (the shipped checkpoint holds only parameters):
+        # its factors f(eps_out) (= eps_b) and f(eps_in); eps_w is formed when first used.
         self.register_buffer("bias_epsilon", torch.zeros(out_features), False)
+        self.register_buffer("input_epsilon", torch.zeros(in_features), False)
+        self._weight_epsilon: torch.Tensor | None = None
         self.reset_noise()
 
     @staticmethod
     def scale_noise(x: torch.Tensor) -> torch.Tensor:
-        return x.sign() * x.abs().sqrt()
+        return torch.copysign(x.abs().sqrt_(), x)  # sign(x) sqrt(|x|)
 
+    @torch.no_grad()
     def reset_noise(self, generator: torch.Generator | None = None) -> None:
         eps_in = self.scale_noise(torch.randn(self.in_features, generator=generator))
         eps_out = self.scale_noise(torch.randn(self.out_features, generator=generator))
-        self.weight_epsilon.copy_(torch.outer(eps_out, eps_in))
-        self.bias_epsilon.copy_(eps_out)
+        self.set_noise(eps_in, eps_out)
+
+    def set_noise(self, eps_in: torch.Tensor, eps_out: torch.Tensor) -> None:
+        """A new noise sample, given by its factors f(eps_in), f(eps_out)."""
+        self.input_epsilon, self.bias_epsilon = eps_in, eps_out
+        self._weight_epsilon = None
+
+    @property
+    def weight_epsilon(self) -> torch.Tensor:
+        """eps_w = f(eps_out) f(eps_in)^T (formed once per noise sample)."""
+        if self._weight_epsilon is None:
+            self._weight_epsilon = torch.outer(self.bias_epsilon, self.input_epsilon)
+        return self._weight_epsilon
+
+    def noise(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The factors (f(eps_in), f(eps_out)) of the noise in use (zeros in eval mode)."""
+        if self.training:
+            return self.input_epsilon, self.bias_epsilon
+        return torch.zeros_like(self.input_epsilon), torch.zeros_like(self.bias_epsilon)
+
+    def weights(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The weight and bias in use: noisy in training mode, the means in eval mode."""
+        if self.training:
+            w = torch.addcmul(self.weight_mu, self.weight_sigma, self.weight_epsilon)
+            b = torch.addcmul(self.bias_mu, self.bias_sigma, self.bias_epsilon)
+            return w, b
+        return self.weight_mu, self.bias_mu
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.training:
-            w = self.weight_mu + self.weight_sigma * self.weight_epsilon
-            b = self.bias_mu + self.bias_sigma * self.bias_epsilon
-            return F.linear(x, w, b)
-        return F.linear(x, self.weight_mu, self.bias_mu)
+        return F.linear(x, *self.weights())
 
 
 def dueling_aggregate(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
@@ -123,6 +156,44 @@ class RainbowConfig:
     sigma0: float = 0.5
 
 
+class NoisyHead(torch.autograd.Function):
+    """Per sample, the logits of one action minus their mean over the actions, of a noisy
+    linear layer with 27 K outputs (K per action): (W h_i + b)[a_i] - mean_a (W h_i + b)[a] with
+    W = mu + sigma (eps_out eps_in^T), b = mu_b + sigma_b eps_out. The compiled loops of
+    :mod:`cdr_bench.rl.kernels` form neither W nor the 27 K outputs: K dot products per sample
+    plus the layer with the mean weights, and a backward pass of the same size. Inputs h (N, I),
+    mu, sigma (27 K, I), mu_b, sigma_b (27 K,), eps_in (I,), eps_out (27 K,), actions (N,) long,
+    K; output (N, K)."""
+
+    @staticmethod
+    def forward(ctx: Any, h, mu, sigma, mu_b, sigma_b, eps_in, eps_out, actions, k):  # type: ignore[override]
+        h = h.contiguous()
+        h_, mu_, sigma_, mu_b_, sigma_b_, eps_in_, eps_out_ = (
+            x.detach().numpy() for x in (h, mu, sigma, mu_b, sigma_b, eps_in, eps_out)
+        )
+        a = actions.numpy()
+        out = np.empty((h.shape[0], k), np.float32)
+        w_mean = np.empty((k, h.shape[1]), np.float32)
+        b_mean = np.empty(k, np.float32)
+        kernels.noisy_head_forward(
+            h_, mu_, sigma_, mu_b_, sigma_b_, eps_in_, eps_out_, a, k, out, w_mean, b_mean
+        )
+        ctx.save_for_backward(h, mu, sigma, eps_in, eps_out)
+        ctx.extra = (a, k, w_mean)
+        return torch.from_numpy(out)
+
+    @staticmethod
+    def backward(ctx: Any, grad_out: torch.Tensor):  # type: ignore[override]
+        h, mu, sigma, eps_in, eps_out = (x.detach().numpy() for x in ctx.saved_tensors)
+        a, k, w_mean = ctx.extra
+        grads = [np.empty_like(x) for x in (h, mu, sigma, eps_out, eps_out)]
+        kernels.noisy_head_backward(
+            h, mu, sigma, eps_in, eps_out, a, k, w_mean, grad_out.contiguous().numpy(), *grads
+        )
+        g_h, g_mu, g_sigma, g_mu_b, g_sigma_b = (torch.from_numpy(x) for x in grads)
+        return g_h, g_mu, g_sigma, g_mu_b, g_sigma_b, None, None, None, None
+
+
 class RainbowNet(nn.Module):
     """Dueling distributional Q network with noisy streams: obs (N, F) -> log-probabilities
     (N, 27, n_atoms) over the support."""
@@ -142,20 +213,46 @@ class RainbowNet(nn.Module):
         )
         self.register_buffer("support", torch.linspace(cfg.v_min, cfg.v_max, k), False)
 
+    @torch.no_grad()
     def reset_noise(self, generator: torch.Generator | None = None) -> None:
-        for m in self.modules():
-            if isinstance(m, NoisyLinear):
-                m.reset_noise(generator)
+        """A new noise sample for every noisy layer: the draws of ``NoisyLinear.reset_noise``
+        layer after layer (the same random stream), scaled in one pass."""
+        layers = [m for m in self.modules() if isinstance(m, NoisyLinear)]
+        sizes = [n for m in layers for n in (m.in_features, m.out_features)]
+        draws = torch.cat([torch.randn(n, generator=generator) for n in sizes])
+        f = NoisyLinear.scale_noise(draws).split(sizes)
+        for i, m in enumerate(layers):
+            m.set_noise(f[2 * i], f[2 * i + 1])
 
-    def log_probs(self, obs: torch.Tensor) -> torch.Tensor:
+    def streams(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Value (N, 1, n_atoms) and advantage (N, 27, n_atoms) logits."""
         h = self.torso(obs)
         v = self.value(h).view(-1, 1, self.cfg.n_atoms)
         a = self.advantage(h).view(-1, N_ACTIONS, self.cfg.n_atoms)
-        return F.log_softmax(dueling_aggregate(v, a), dim=-1)
+        return v, a
+
+    def log_probs(self, obs: torch.Tensor) -> torch.Tensor:
+        return F.log_softmax(dueling_aggregate(*self.streams(obs)), dim=-1)
+
+    def log_probs_of(self, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """(N, n_atoms): the rows ``log_probs(obs)[i, actions[i]]`` (the same function),
+        computing only what they need: of the advantage's noisy output layer, the logits of
+        action a_i minus their mean over the actions (:class:`NoisyHead`; for a linear layer
+        the mean over actions is the layer with the mean weights)."""
+        h = self.torso(obs)
+        v = self.value(h)
+        hidden = self.advantage[1](self.advantage[0](h))
+        out: NoisyLinear = self.advantage[2]  # type: ignore[assignment]
+        eps_in, eps_out = out.noise()
+        d = NoisyHead.apply(
+            hidden, out.weight_mu, out.weight_sigma, out.bias_mu, out.bias_sigma,
+            eps_in, eps_out, actions, self.cfg.n_atoms,
+        )  # fmt: skip
+        return F.log_softmax(v + d, dim=-1)
 
     def q_values(self, obs: torch.Tensor) -> torch.Tensor:
         """(N, 27) expected returns."""
-        return (self.log_probs(obs).exp() * self.support).sum(-1)
+        return torch.softmax(dueling_aggregate(*self.streams(obs)), dim=-1) @ self.support
 
     @torch.no_grad()
     def act(self, obs: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -175,7 +272,8 @@ class Rainbow(LearnerParts):
         self.cfg, self.polyak = cfg, polyak
         self.net = RainbowNet(cfg)
         self.target: RainbowNet = frozen_copy(self.net)  # type: ignore[assignment]
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=lr, eps=adam_eps)
+        self.flat = FlatParameters(self.net)  # after the target's copy
+        self.opt = adam([self.flat.flat], lr=lr, eps=adam_eps)
         self.priorities = np.zeros(0, np.float32)
         """per-sample priorities (cross-entropy) of the last update's batch"""
 
@@ -185,7 +283,8 @@ class Rainbow(LearnerParts):
         self.net.train(explore)
         if explore:
             self.net.reset_noise()
-        return self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
+        with torch.inference_mode():
+            return self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
 
     @torch.no_grad()
     def target_distribution(
@@ -198,7 +297,7 @@ class Rainbow(LearnerParts):
         """Double-Q, masked: a* = argmax over the next state's feasible actions of the online
         expected Q; project the target network's distribution of (s', a*)."""
         a_star = masked_argmax(self.net.q_values(next_obs), next_mask)
-        p_next = self.target.log_probs(next_obs).exp()[torch.arange(len(a_star)), a_star]
+        p_next = self.target.log_probs_of(next_obs, a_star).exp()
         return project_distribution(p_next, reward, discount, self.net.support)
 
     def update(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
@@ -208,12 +307,13 @@ class Rainbow(LearnerParts):
         self.target.reset_noise()
         discount = b["discount"] * (1.0 - b["done"])
         target = self.target_distribution(b["next_obs"], b["next_mask"], b["reward"], discount)
-        logp = self.net.log_probs(b["obs"])[torch.arange(len(b["action"])), b["action"]]
+        logp = self.net.log_probs_of(b["obs"], b["action"])
         ce = -(target * logp).sum(-1)
         loss = (b["weight"] * ce).mean()
-        self.opt.zero_grad()
+        self.flat.zero_grad()
         loss.backward()
-        nn.utils.clip_grad_norm_(self.net.parameters(), 10.0)
+        self.flat.collect_grad()
+        self.flat.clip_grad_norm(10.0)
         self.opt.step()
         polyak_update(self.target, self.net, self.polyak)
         self.priorities = ce.detach().numpy()

@@ -1,4 +1,5 @@
-"""Replay of the off-policy loop, in preallocated numpy arrays (pure numpy).
+"""Replay of the off-policy loop, in preallocated numpy arrays (numpy, and numba for the sum tree
+and the n-step queues).
 
 A transition is one flying aircraft, one step: ``obs, mask, action, reward, goal_reward,
 safety_reward, next_obs, next_mask, done, discount`` (``reward`` = goal + safety part; Safe-DQN-X
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cdr_bench.rl import kernels
 from cdr_bench.rl.common import linear_schedule
 
 Batch = dict[str, NDArray]
@@ -78,8 +80,9 @@ class ReplayBuffer:
 
 
 class SumTree:
-    """Binary sum tree over ``capacity`` leaves (rounded up to a power of two), vectorised:
-    ``update`` sets many leaves at once, ``find`` descends for many prefix sums at once."""
+    """Binary sum tree over ``capacity`` leaves (rounded up to a power of two): ``update`` sets
+    many leaves at once, ``find`` descends for many prefix sums at once (compiled loops,
+    :mod:`cdr_bench.rl.kernels`)."""
 
     def __init__(self, capacity: int):
         self.n_leaves = 1 << max(0, int(capacity - 1).bit_length())
@@ -90,24 +93,17 @@ class SumTree:
         return float(self.tree[1])
 
     def update(self, idx: NDArray[np.integer], value: NDArray[np.floating]) -> None:
-        node = np.asarray(idx, np.int64) + self.n_leaves
-        self.tree[node] = value
-        node = np.unique(node // 2)
-        while node.size and node[0] >= 1:
-            self.tree[node] = self.tree[2 * node] + self.tree[2 * node + 1]
-            node = np.unique(node // 2)
-            node = node[node >= 1]
+        """Leaves ``idx`` <- ``value`` (a repeated leaf keeps its last value), sums above."""
+        leaves = np.ascontiguousarray(idx, np.int64)
+        values = np.ascontiguousarray(np.broadcast_to(value, leaves.shape), np.float64)
+        kernels.sum_tree_update(self.tree, self.n_leaves, leaves, values)
 
     def find(self, prefix: NDArray[np.floating]) -> NDArray[np.int64]:
         """Leaf index i with cumsum(leaves)[i-1] <= prefix < cumsum(leaves)[i], per prefix."""
-        u = np.asarray(prefix, np.float64).copy()
-        node = np.ones(len(u), np.int64)
-        while node[0] < self.n_leaves:
-            left = 2 * node
-            go_right = u >= self.tree[left]
-            u = np.where(go_right, u - self.tree[left], u)
-            node = left + go_right
-        return node - self.n_leaves
+        sums = np.ascontiguousarray(prefix, np.float64)
+        out = np.empty(len(sums), np.int64)
+        kernels.sum_tree_find(self.tree, self.n_leaves, sums, out)
+        return out
 
 
 class PrioritizedReplayBuffer(ReplayBuffer):
@@ -157,40 +153,116 @@ class NStepAccumulator:
     """Turns per-step transitions of the aircraft in ``n_slots`` slots into n-step transitions
     (s_t, a_t, R = sum_{k<K} gamma^k r_{t+k}, s_{t+K}, done, gamma^K) with K = n, or fewer when
     the aircraft's flight ends first (then every pending transition of the slot is emitted).
-    Every reward column (``reward``, ``goal_reward``, ``safety_reward``) is summed alike."""
+    Every reward column (``reward``, ``goal_reward``, ``safety_reward``) is summed alike, in
+    float32 from the oldest step.
+
+    The pending steps of each slot are a ring buffer of n rows in preallocated arrays, pushed
+    and emitted by one compiled loop (:func:`cdr_bench.rl.kernels.n_step_push`);
+    :attr:`pending` shows them as lists."""
 
     def __init__(self, n_slots: int, n: int, gamma: float):
-        self.n, self.gamma = n, gamma
-        self.pending: list[list[tuple]] = [[] for _ in range(n_slots)]
+        self.n, self.gamma, self.n_slots = n, gamma, n_slots
+        self.gamma_pow = np.array([np.float32(gamma**k) for k in range(n + 1)], np.float32)
+        self.q: dict[str, NDArray] | None = None  # allocated at the first push
+        self.q_start = np.zeros(n_slots, np.int64)
+        self.q_len = np.zeros(n_slots, np.int64)
+
+    def _allocate(self, obs_dim: int, n_actions: int) -> dict[str, NDArray]:
+        s, n = self.n_slots, self.n
+        self.q = {
+            "obs": np.zeros((s, n, obs_dim), np.float32),
+            "mask": np.zeros((s, n, n_actions), np.int8),
+            "action": np.zeros((s, n), np.int64),
+            "rewards": np.zeros((s, n, len(REWARDS)), np.float32),
+        }
+        return self.q
 
     def push(self, slots: NDArray[np.integer], tr: Mapping[str, Any], ended) -> Batch:
         """One step of the aircraft in ``slots`` (row i of every column is slot ``slots[i]``;
         ``ended[i]``: its flight ended); returns the completed n-step transitions, in slot
         order (possibly none)."""
-        rows: list[tuple] = []
-        for i, s in enumerate(slots):
-            q = self.pending[s]
-            q.append((tr["obs"][i], tr["mask"][i], tr["action"][i], *(tr[k][i] for k in REWARDS)))
-            if len(q) == self.n:
-                rows.append(self._emit(q, tr, i))
-                q.pop(0)
-            if ended[i]:
-                while q:
-                    rows.append(self._emit(q, tr, i))
-                    q.pop(0)
-        keys = ("obs", "mask", "action", *REWARDS, "next_obs", "next_mask", "done", "discount")
-        if not rows:
+        obs = np.ascontiguousarray(tr["obs"], np.float32)
+        mask = np.ascontiguousarray(tr["mask"], np.int8)
+        q = self.q if self.q is not None else self._allocate(obs.shape[1], mask.shape[1])
+        rows = len(slots)
+        cap = rows * self.n
+        out: dict[str, NDArray[Any]] = {
+            "src": np.empty(cap, np.int64),
+            "row": np.empty(cap, np.int64),
+            "obs": np.empty((cap, obs.shape[1]), np.float32),
+            "mask": np.empty((cap, mask.shape[1]), np.int8),
+            "action": np.empty(cap, np.int64),
+            "rewards": np.empty((cap, len(REWARDS)), np.float32),
+            "discount": np.empty(cap, np.float32),
+        }
+        m = kernels.n_step_push(
+            np.ascontiguousarray(slots, np.int64),
+            obs,
+            mask,
+            np.ascontiguousarray(tr["action"], np.int64),
+            np.stack([np.asarray(tr[k], np.float32) for k in REWARDS], axis=1),
+            np.ascontiguousarray(ended, np.bool_),
+            q["obs"],
+            q["mask"],
+            q["action"],
+            q["rewards"],
+            self.q_start,
+            self.q_len,
+            self.gamma_pow,
+            out["src"],
+            out["row"],
+            out["obs"],
+            out["mask"],
+            out["action"],
+            out["rewards"],
+            out["discount"],
+        )
+        if not m:
             return {"action": np.zeros(0, np.int64)}
-        return {k: np.asarray(c) for k, c in zip(keys, zip(*rows, strict=True), strict=True)}
+        r = out["row"][:m]
+        batch = {k: out[k][:m] for k in ("obs", "mask", "action")}
+        batch.update({k: out["rewards"][:m, j] for j, k in enumerate(REWARDS)})
+        batch.update({k: np.asarray(tr[k])[r] for k in ("next_obs", "next_mask", "done")})
+        batch["discount"] = out["discount"][:m]
+        return batch
 
-    def _emit(self, q: list[tuple], tr: Mapping[str, Any], i: int) -> tuple:
-        returns = [
-            np.float32(sum(self.gamma**k * step[3 + j] for k, step in enumerate(q)))
-            for j in range(len(REWARDS))
-        ]
-        s, m, a = q[0][:3]
-        nxt = (tr["next_obs"][i], tr["next_mask"][i], tr["done"][i])
-        return (s, m, a, *returns, *nxt, np.float32(self.gamma ** len(q)))
+    @property
+    def pending(self) -> list[list[tuple]]:
+        """Per slot, its pending steps, oldest first: (obs, mask, action, *rewards)."""
+        out: list[list[tuple]] = [[] for _ in range(self.n_slots)]
+        if self.q is None:
+            return out
+        for s in np.flatnonzero(self.q_len):
+            for k in range(self.q_len[s]):
+                j = (self.q_start[s] + k) % self.n
+                rewards = tuple(self.q["rewards"][s, j])
+                out[s].append(
+                    (self.q["obs"][s, j], self.q["mask"][s, j], self.q["action"][s, j], *rewards)
+                )
+        return out
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"q": self.q, "start": self.q_start, "len": self.q_len}
+
+    def load_state_dict(self, state: dict[str, Any] | list[list[tuple]]) -> None:
+        self.q_start[:] = 0
+        self.q_len[:] = 0
+        if isinstance(state, dict):
+            self.q = None if state["q"] is None else {k: v.copy() for k, v in state["q"].items()}
+            self.q_start[:] = state["start"]
+            self.q_len[:] = state["len"]
+            return
+        # the lists of a state written before the ring buffers
+        first = next((q[0] for q in state if q), None)
+        self.q = None
+        if first is None:
+            return
+        q = self._allocate(len(first[0]), len(first[1]))
+        for s, steps in enumerate(state):
+            for k, (o, mk, a, *rewards) in enumerate(steps):
+                q["obs"][s, k], q["mask"][s, k], q["action"][s, k] = o, mk, a
+                q["rewards"][s, k] = rewards
+            self.q_len[s] = len(steps)
 
 
 @dataclass(frozen=True)
@@ -244,10 +316,10 @@ class Replay:
         self.buffer.update_priorities(batch["index"], priority)
 
     def state_dict(self) -> dict[str, Any]:
-        pending = self.nstep.pending if self.nstep is not None else None
+        pending = self.nstep.state_dict() if self.nstep is not None else None
         return {"buffer": self.buffer.state_dict(), "pending": pending}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.buffer.load_state_dict(state["buffer"])
         if self.nstep is not None:
-            self.nstep.pending = state["pending"]
+            self.nstep.load_state_dict(state["pending"])

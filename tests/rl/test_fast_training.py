@@ -166,32 +166,38 @@ def test_flat_parameters_adam_and_clipping_match_per_tensor():
     flat = FlatParameters(net)
     opt_flat = adam([flat.flat], lr=1e-2)
     opt_ref = adam(twin.parameters(), lr=1e-2)
-    for i in range(5):
+    for i in range(6):
         x = torch.randn(16, 6)
         flat.zero_grad()
         (net(x) ** 2).sum().backward()
+        flat.collect_grad()
         opt_ref.zero_grad(set_to_none=True)
         (twin(x) ** 2).sum().backward()
-        for p, q in zip(net.parameters(), twin.parameters(), strict=True):
-            assert torch.equal(p.grad, q.grad)
-        flat.clip_grad_norm(0.5 if i % 2 else 1e6)
-        torch.nn.utils.clip_grad_norm_(twin.parameters(), 0.5 if i % 2 else 1e6)
-        for p, q in zip(net.parameters(), twin.parameters(), strict=True):
-            assert torch.allclose(p.grad, q.grad, rtol=1e-6, atol=1e-8)
-            p.grad.copy_(q.grad)  # continue from the same gradients
+        assert torch.equal(
+            flat.flat.grad, torch.cat([q.grad.reshape(-1) for q in twin.parameters()])
+        )
+        max_norm = 0.5 if i % 2 else 1e6  # clipping, then not
+        flat.clip_grad_norm(max_norm)
+        torch.nn.utils.clip_grad_norm_(twin.parameters(), max_norm)
+        ref = torch.cat([q.grad.reshape(-1) for q in twin.parameters()])
+        assert torch.allclose(flat.flat.grad, ref, rtol=1e-6, atol=1e-8)
+        flat.flat.grad.copy_(ref)  # continue from the same gradients
         opt_flat.step()
         opt_ref.step()
         for p, q in zip(net.parameters(), twin.parameters(), strict=True):
             assert torch.allclose(p, q, rtol=1e-6, atol=1e-7)
+            assert p.data_ptr() != q.data_ptr()
 
 
-def test_polyak_update_is_the_per_tensor_arithmetic():
+def test_polyak_update_is_one_lerp_per_tensor():
     torch.manual_seed(5)
     a, b = TwinCritic(7, 16), TwinCritic(7, 16)
-    expect = [tp.detach().clone().mul_(0.99).add_(sp, alpha=0.01) for tp, sp in
-              zip(a.parameters(), b.parameters(), strict=True)]  # fmt: skip
+    pairs = list(zip(a.parameters(), b.parameters(), strict=True))
+    lerp = [tp.detach().clone().lerp_(sp, 0.01) for tp, sp in pairs]
+    mul_add = [tp.detach().clone().mul_(0.99).add_(sp, alpha=0.01) for tp, sp in pairs]
     polyak_update(a, b, 0.01)
-    assert all(torch.equal(x, y) for x, y in zip(a.parameters(), expect, strict=True))
+    assert all(torch.equal(x, y) for x, y in zip(a.parameters(), lerp, strict=True))
+    assert all(torch.allclose(x, y) for x, y in zip(a.parameters(), mul_add, strict=True))
 
 
 def _batch(n: int = 64, seed: int = 0) -> dict[str, torch.Tensor]:
@@ -223,3 +229,166 @@ def test_diffusion_ac_update_is_deterministic(ce_input):
 
     a, b = run(), run()
     assert all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+# --- replay: the compiled sum tree and n-step queues against the implementations they replaced
+
+
+class _NumpySumTree:
+    """The level-by-level numpy sum tree (before issue 16)."""
+
+    def __init__(self, capacity: int):
+        self.n_leaves = 1 << max(0, int(capacity - 1).bit_length())
+        self.tree = np.zeros(2 * self.n_leaves, np.float64)
+
+    def update(self, idx, value) -> None:
+        node = np.asarray(idx, np.int64) + self.n_leaves
+        self.tree[node] = value
+        node = np.unique(node // 2)
+        while node.size and node[0] >= 1:
+            self.tree[node] = self.tree[2 * node] + self.tree[2 * node + 1]
+            node = np.unique(node // 2)
+            node = node[node >= 1]
+
+    def find(self, prefix):
+        u = np.asarray(prefix, np.float64).copy()
+        node = np.ones(len(u), np.int64)
+        while node[0] < self.n_leaves:
+            left = 2 * node
+            go_right = u >= self.tree[left]
+            u = np.where(go_right, u - self.tree[left], u)
+            node = left + go_right
+        return node - self.n_leaves
+
+
+def test_sum_tree_equals_the_numpy_tree_bit_for_bit():
+    from cdr_bench.rl.replay import SumTree
+
+    rng = np.random.default_rng(7)
+    for capacity in (1, 5, 1000):
+        fast, ref = SumTree(capacity), _NumpySumTree(capacity)
+        for _ in range(50):
+            idx = rng.integers(0, capacity, rng.integers(1, 40))  # repeats included
+            value = rng.random(len(idx)) ** 3
+            fast.update(idx, value)
+            ref.update(idx, value)
+            assert np.array_equal(fast.tree, ref.tree)
+            prefix = rng.random(64) * fast.total
+            assert np.array_equal(fast.find(prefix), ref.find(prefix))
+
+
+class _ListNStep:
+    """The per-slot Python lists of n-step returns (before issue 16)."""
+
+    REWARDS = ("reward", "goal_reward", "safety_reward")
+
+    def __init__(self, n_slots: int, n: int, gamma: float):
+        self.n, self.gamma = n, gamma
+        self.pending: list[list[tuple]] = [[] for _ in range(n_slots)]
+
+    def push(self, slots, tr, ended):
+        rows: list[tuple] = []
+        for i, s in enumerate(slots):
+            q = self.pending[s]
+            q.append(
+                (tr["obs"][i], tr["mask"][i], tr["action"][i], *(tr[k][i] for k in self.REWARDS))
+            )
+            if len(q) == self.n:
+                rows.append(self._emit(q, tr, i))
+                q.pop(0)
+            if ended[i]:
+                while q:
+                    rows.append(self._emit(q, tr, i))
+                    q.pop(0)
+        keys = ("obs", "mask", "action", *self.REWARDS, "next_obs", "next_mask", "done", "discount")
+        if not rows:
+            return {"action": np.zeros(0, np.int64)}
+        return {k: np.asarray(c) for k, c in zip(keys, zip(*rows, strict=True), strict=True)}
+
+    def _emit(self, q, tr, i):
+        returns = [
+            np.float32(sum(self.gamma**k * step[3 + j] for k, step in enumerate(q)))
+            for j in range(len(self.REWARDS))
+        ]
+        nxt = (tr["next_obs"][i], tr["next_mask"][i], tr["done"][i])
+        return (*q[0][:3], *returns, *nxt, np.float32(self.gamma ** len(q)))
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_n_step_queues_equal_the_lists_bit_for_bit(n):
+    from cdr_bench.rl.replay import NStepAccumulator
+
+    rng = np.random.default_rng(n)
+    fast, ref = NStepAccumulator(6, n, 0.99), _ListNStep(6, n, 0.99)
+    for step in range(60):
+        slots = np.sort(rng.choice(6, rng.integers(1, 7), replace=False))
+        k = len(slots)
+        tr = {
+            "obs": rng.standard_normal((k, 5), dtype=np.float32),
+            "mask": rng.integers(0, 2, (k, 27)).astype(np.int8),
+            "action": rng.integers(0, 27, k),
+            "reward": rng.standard_normal(k).astype(np.float32),
+            "goal_reward": rng.standard_normal(k).astype(np.float32),
+            "safety_reward": -rng.random(k).astype(np.float32),
+            "next_obs": rng.standard_normal((k, 5), dtype=np.float32),
+            "next_mask": rng.integers(0, 2, (k, 27)).astype(np.int8),
+            "done": (rng.random(k) < 0.1).astype(np.float32),
+        }
+        ended = rng.random(k) < 0.15
+        a, b = fast.push(slots, tr, ended), ref.push(slots, tr, ended)
+        assert a.keys() == b.keys() or len(b["action"]) == 0
+        for key in b:
+            assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), key
+        if step == 30:  # the state round trip, and a state of the lists loads
+            for state in (fast.state_dict(), ref.pending):
+                again = NStepAccumulator(6, n, 0.99)
+                again.load_state_dict(copy.deepcopy(state))
+                assert repr(again.pending) == repr(fast.pending)
+            fast.load_state_dict(copy.deepcopy(ref.pending))
+
+
+# --- Rainbow ----------------------------------------------------------------------------------
+
+
+def test_rainbow_rows_of_taken_actions_equal_the_full_head():
+    """log_probs_of (one action's atoms per sample, the noisy head in compiled loops) against
+    the rows of log_probs (every action): values and gradients, noise on and off."""
+    from cdr_bench.rl.rainbow import RainbowConfig, RainbowNet
+
+    torch.manual_seed(8)
+    net = RainbowNet(RainbowConfig(obs_dim=42, width=64, n_atoms=11))
+    net.reset_noise()
+    g = torch.Generator().manual_seed(9)
+    obs = torch.randn(40, 42, generator=g)
+    actions = torch.randint(0, 27, (40,), generator=g)
+    up = torch.randn(40, 11, generator=g)
+    for training in (True, False):
+        net.train(training)
+        params = [p for name, p in net.named_parameters() if training or "sigma" not in name]
+        ref = net.log_probs(obs)[torch.arange(40), actions]
+        got = net.log_probs_of(obs, actions)
+        _close(got, ref)
+        g_ref = torch.autograd.grad((ref * up).sum(), params)
+        g_got = torch.autograd.grad((got * up).sum(), params)
+        for x, y in zip(g_got, g_ref, strict=True):
+            _close(x, y, 1e-5)
+
+
+def test_rainbow_noise_and_q_values():
+    """One draw for the whole network is the layers' draws in order, and the expected Q is
+    the mean of the support under the softmax of the aggregated logits."""
+    from cdr_bench.rl.rainbow import NoisyLinear, RainbowConfig, RainbowNet
+
+    torch.manual_seed(10)
+    net = RainbowNet(RainbowConfig(obs_dim=5, width=16, n_atoms=7))
+    layers = [m for m in net.modules() if isinstance(m, NoisyLinear)]
+    net.reset_noise(torch.Generator().manual_seed(11))
+    gen = torch.Generator().manual_seed(11)
+    for m in layers:
+        e_in = NoisyLinear.scale_noise(torch.randn(m.in_features, generator=gen))
+        e_out = NoisyLinear.scale_noise(torch.randn(m.out_features, generator=gen))
+        assert torch.equal(m.input_epsilon, e_in) and torch.equal(m.bias_epsilon, e_out)
+        assert torch.equal(m.weight_epsilon, torch.outer(e_out, e_in))
+    obs = torch.randn(9, 5)
+    expect = (net.log_probs(obs).exp() * net.support).sum(-1)
+    assert torch.allclose(net.q_values(obs), expect, atol=1e-5)
