@@ -210,13 +210,19 @@ def attention_backward(
 def sum_tree_update(
     tree: NDArray[np.float64], n_leaves: int, idx: NDArray[np.int64], value: NDArray[np.float64]
 ) -> None:
+    """Leaves ``idx`` <- ``value``, then the sums above them level by level (the reads of one
+    level overlap; a parent shared by several leaves is recomputed from final children)."""
+    node = np.empty(len(idx), np.int64)
     for i in range(len(idx)):
-        node = idx[i] + n_leaves
-        tree[node] = value[i]
-        node //= 2
-        while node >= 1:
-            tree[node] = tree[2 * node] + tree[2 * node + 1]
-            node //= 2
+        node[i] = idx[i] + n_leaves
+        tree[node[i]] = value[i]
+    level = n_leaves
+    while level > 1:
+        for i in range(len(idx)):
+            parent = node[i] // 2
+            node[i] = parent
+            tree[parent] = tree[2 * parent] + tree[2 * parent + 1]
+        level //= 2
 
 
 @njit(cache=True)
@@ -316,6 +322,22 @@ def n_step_push(
 # sigma (dense: the mean reaches every block) and h.
 
 
+@njit(cache=True)
+def _groups(actions: NDArray[np.int64], n_act: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The samples ordered by action (stable) and where each action's group starts."""
+    start = np.zeros(n_act + 1, np.int64)
+    for n in range(len(actions)):
+        start[actions[n] + 1] += 1
+    for a in range(n_act):
+        start[a + 1] += start[a]
+    fill = start[:-1].copy()
+    order = np.empty(len(actions), np.int64)
+    for n in range(len(actions)):
+        order[fill[actions[n]]] = n
+        fill[actions[n]] += 1
+    return order, start
+
+
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def noisy_head_forward(
     h: NDArray[np.float32],
@@ -332,10 +354,11 @@ def noisy_head_forward(
     b_mean: NDArray[np.float32],
 ) -> None:
     """``out`` (N, K) = taken-action logits minus the mean over actions; ``w_mean`` (K, I),
-    ``b_mean`` (K,) are written (kept for the backward pass)."""
-    n_rows, width = h.shape
-    n_blocks = mu.shape[0] // k
-    inv = np.float32(1.0 / n_blocks)
+    ``b_mean`` (K,) are written (kept for the backward pass). Samples grouped by action: each
+    row of W is formed once."""
+    width = h.shape[1]
+    n_act = mu.shape[0] // k
+    inv = np.float32(1.0 / n_act)
     w_mean[:] = 0.0
     b_mean[:] = 0.0
     for o in range(mu.shape[0]):
@@ -349,17 +372,25 @@ def noisy_head_forward(
         for i in range(width):
             w_mean[j, i] *= inv
         b_mean[j] *= inv
-    for n in range(n_rows):
-        base = actions[n] * k
-        hn = h[n]
+    order, start = _groups(actions, n_act)
+    row = np.empty(width, np.float32)
+    for a in range(n_act):
+        if start[a] == start[a + 1]:
+            continue
         for j in range(k):
-            o = base + j
+            o = a * k + j
             eo = eps_out[o]
             m, sg, wm = mu[o], sigma[o], w_mean[j]
-            acc = np.float32(0.0)
             for i in range(width):
-                acc += (m[i] + sg[i] * (eo * eps_in[i]) - wm[i]) * hn[i]
-            out[n, j] = acc + (mu_b[o] + sigma_b[o] * eo - b_mean[j])
+                row[i] = m[i] + sg[i] * (eo * eps_in[i]) - wm[i]
+            bias = mu_b[o] + sigma_b[o] * eo - b_mean[j]
+            for p in range(start[a], start[a + 1]):
+                n = order[p]
+                hn = h[n]
+                acc = np.float32(0.0)
+                for i in range(width):
+                    acc += row[i] * hn[i]
+                out[n, j] = acc + bias
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -379,10 +410,10 @@ def noisy_head_backward(
     grad_mu_b: NDArray[np.float32],
     grad_sigma_b: NDArray[np.float32],
 ) -> None:
-    """Writes every gradient (no zeroing needed)."""
+    """Writes every gradient (no zeroing needed); each row of the weights' gradients once."""
     n_rows, width = h.shape
-    n_out = mu.shape[0]
-    inv = np.float32(1.0 / (n_out // k))
+    n_act = mu.shape[0] // k
+    inv = np.float32(1.0 / n_act)
     # the mean over actions: every block gets -1/27 sum_n g_n h_n^T
     g_mean = np.zeros((k, width), np.float32)
     gb_mean = np.zeros(k, np.float32)
@@ -391,33 +422,131 @@ def noisy_head_backward(
         for j in range(k):
             g = grad_out[n, j]
             gb_mean[j] += g
-            row = g_mean[j]
-            for i in range(width):
-                row[i] += g * hn[i]
-    for o in range(n_out):
-        src, dst = g_mean[o % k], grad_mu[o]
-        for i in range(width):
-            dst[i] = -inv * src[i]
-        grad_mu_b[o] = -inv * gb_mean[o % k]
-    # the taken action's rows; the input's gradient
-    for n in range(n_rows):
-        base = actions[n] * k
-        hn, gh = h[n], grad_h[n]
-        gh[:] = 0.0
-        for j in range(k):
-            o = base + j
-            g = grad_out[n, j]
-            eo = eps_out[o]
-            grad_mu_b[o] += g
-            gm, m, sg, wm = grad_mu[o], mu[o], sigma[o], w_mean[j]
+            gm = g_mean[j]
             for i in range(width):
                 gm[i] += g * hn[i]
+    grad_h[:] = 0.0
+    order, start = _groups(actions, n_act)
+    row = np.empty(width, np.float32)
+    wrow = np.empty(width, np.float32)
+    for a in range(n_act):
+        for j in range(k):
+            o = a * k + j
+            eo = eps_out[o]
+            gm = g_mean[j]
             for i in range(width):
-                gh[i] += g * (m[i] + sg[i] * (eo * eps_in[i]) - wm[i])
-    # sigma's gradient: that of the composed weight times its noise
-    for o in range(n_out):
+                row[i] = -inv * gm[i]
+            gb = -inv * gb_mean[j]
+            if start[a] < start[a + 1]:
+                m, sg, wm = mu[o], sigma[o], w_mean[j]
+                for i in range(width):
+                    wrow[i] = m[i] + sg[i] * (eo * eps_in[i]) - wm[i]
+                for p in range(start[a], start[a + 1]):
+                    n = order[p]
+                    g = grad_out[n, j]
+                    gb += g
+                    hn, gh = h[n], grad_h[n]
+                    for i in range(width):
+                        row[i] += g * hn[i]
+                        gh[i] += g * wrow[i]
+            dmu, dsg = grad_mu[o], grad_sigma[o]
+            for i in range(width):
+                dmu[i] = row[i]
+                dsg[i] = row[i] * (eo * eps_in[i])
+            grad_mu_b[o] = gb
+            grad_sigma_b[o] = gb * eo
+
+
+@njit(cache=True, fastmath={"contract"})
+def noisy_weight(
+    mu: NDArray[np.float32],
+    sigma: NDArray[np.float32],
+    eps_in: NDArray[np.float32],
+    eps_out: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    """out = mu + sigma * (eps_out eps_in^T), in one pass."""
+    for o in range(mu.shape[0]):
         eo = eps_out[o]
-        src, dst = grad_mu[o], grad_sigma[o]
-        for i in range(width):
-            dst[i] = src[i] * (eo * eps_in[i])
-        grad_sigma_b[o] = grad_mu_b[o] * eo
+        m, s, w = mu[o], sigma[o], out[o]
+        for i in range(mu.shape[1]):
+            w[i] = m[i] + s[i] * (eo * eps_in[i])
+
+
+@njit(cache=True, fastmath={"contract", "reassoc", "nsz"}, error_model="numpy")
+def dueling_expected_q(
+    adv: NDArray[np.float32],
+    bias: NDArray[np.float32],
+    value: NDArray[np.float32],
+    support: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    """``out`` (N, A): the expected return sum_z softmax_z(V_z + A_az - mean_a' A_a'z) z of the
+    dueling C51 head, from the advantage logits without their bias ``adv`` (N, A K) + ``bias``
+    (A K) and the value logits (N, K), in one pass (exp as in :func:`_exp_parts`)."""
+    n_rows = adv.shape[0]
+    k = value.shape[1]
+    n_act = adv.shape[1] // k
+    inv = np.float32(1.0 / n_act)
+    shift = np.empty(k, np.float32)
+    logits = np.empty(n_act * k, np.float32)
+    mant = np.empty(n_act * k, np.float32)
+    bits = np.empty(n_act * k, np.int32)
+    scale = bits.view(np.float32)
+    for n in range(n_rows):
+        row = adv[n]
+        for i in range(n_act * k):
+            logits[i] = row[i] + bias[i]
+        shift[:] = 0.0
+        for a in range(n_act):
+            for j in range(k):
+                shift[j] += logits[a * k + j]
+        for j in range(k):
+            shift[j] = value[n, j] - inv * shift[j]
+        for a in range(n_act):
+            m = logits[a * k] + shift[0]
+            for j in range(k):
+                x = logits[a * k + j] + shift[j]
+                logits[a * k + j] = x
+                m = max(m, x)
+            for j in range(k):
+                logits[a * k + j] -= m
+        _exp_parts(logits, mant, bits)
+        for a in range(n_act):
+            num = np.float32(0.0)
+            den = np.float32(0.0)
+            for j in range(k):
+                e = mant[a * k + j] * scale[a * k + j]
+                num += e * support[j]
+                den += e
+            out[n, a] = num / den
+
+
+@njit(cache=True)
+def c51_projection(
+    probs: NDArray[np.float32],
+    reward: NDArray[np.float32],
+    discount: NDArray[np.float32],
+    support: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    """C51 projection of r + discount Z onto ``support`` (evenly spaced), per row: each
+    shifted atom's mass split between the two atoms around it (all on one when it lands on
+    one), in float32 as the tensor version (:func:`cdr_bench.rl.rainbow.project_distribution`)."""
+    n_rows, k = probs.shape
+    v_min, v_max = support[0], support[k - 1]
+    dz = np.float32((np.float64(v_max) - np.float64(v_min)) / (k - 1))
+    out[:] = 0.0
+    for n in range(n_rows):
+        for j in range(k):
+            tz = min(max(reward[n] + discount[n] * support[j], v_min), v_max)
+            b = (tz - v_min) / dz
+            lo = np.floor(b)
+            hi = np.ceil(b)
+            p = probs[n, j]
+            il, ih = int(lo), int(hi)
+            if il == ih:
+                out[n, il] += p
+            else:
+                out[n, il] += p * (hi - b)
+                out[n, ih] += p * (b - lo)

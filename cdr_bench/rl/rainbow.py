@@ -132,18 +132,16 @@ def project_distribution(
     probs (N, K) on ``support`` (K,) evenly spaced from v_min to v_max; reward, discount (N,)
     (discount = gamma^n (1 - done)). Each shifted atom Tz_j = clip(r + discount z_j) lands at
     b = (Tz_j - v_min) / dz and splits its mass between atoms floor(b) and ceil(b) in proportion
-    to closeness (all of it to b when b is an integer). Returns (N, K), rows summing to 1.
+    to closeness (all of it to b when b is an integer). Returns (N, K), rows summing to 1
+    (float32, no gradient; one compiled loop, :func:`cdr_bench.rl.kernels.c51_projection`).
     """
-    v_min, v_max = float(support[0]), float(support[-1])
-    dz = (v_max - v_min) / (len(support) - 1)
-    tz = (reward[:, None] + discount[:, None] * support[None, :]).clamp(v_min, v_max)
-    b = (tz - v_min) / dz
-    lower, upper = b.floor().long(), b.ceil().long()
-    out = torch.zeros_like(probs)
-    out.scatter_add_(1, lower, probs * (upper.to(probs.dtype) - b))
-    out.scatter_add_(1, upper, probs * (b - lower.to(probs.dtype)))
-    out.scatter_add_(1, lower, probs * (lower == upper).to(probs.dtype))
-    return out
+    p, r, d, z = (
+        x.detach().contiguous().to(torch.float32).numpy()
+        for x in (probs, reward, discount, support)
+    )
+    out = np.empty(p.shape, np.float32)
+    kernels.c51_projection(p, r, d, z, out)
+    return torch.from_numpy(out)
 
 
 @dataclass
@@ -255,6 +253,28 @@ class RainbowNet(nn.Module):
         return torch.softmax(dueling_aggregate(*self.streams(obs)), dim=-1) @ self.support
 
     @torch.no_grad()
+    def expected_q(self, obs: torch.Tensor) -> torch.Tensor:
+        """:meth:`q_values` (the same function, to float rounding), without gradients and
+        faster: the advantage's noisy output layer formed in one pass, its product without the
+        bias, then aggregation, softmax over atoms and expectation in one compiled pass per
+        state (:func:`cdr_bench.rl.kernels.dueling_expected_q`)."""
+        h = self.torso(obs)
+        v = self.value(h)
+        hidden = self.advantage[1](self.advantage[0](h))
+        out: NoisyLinear = self.advantage[2]  # type: ignore[assignment]
+        eps_in, eps_out = (x.detach().numpy() for x in out.noise())
+        mu, sigma = out.weight_mu.detach().numpy(), out.weight_sigma.detach().numpy()
+        w = np.empty_like(mu)
+        kernels.noisy_weight(mu, sigma, eps_in, eps_out, w)
+        adv = torch.mm(hidden, torch.from_numpy(w).t())
+        b = torch.addcmul(out.bias_mu, out.bias_sigma, out.noise()[1]).detach()
+        q = np.empty((len(obs), N_ACTIONS), np.float32)
+        kernels.dueling_expected_q(
+            adv.numpy(), b.numpy(), v.contiguous().numpy(), self.support.numpy(), q
+        )
+        return torch.from_numpy(q)
+
+    @torch.no_grad()
     def act(self, obs: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         return masked_argmax(self.q_values(obs), mask)
 
@@ -284,7 +304,8 @@ class Rainbow(LearnerParts):
         if explore:
             self.net.reset_noise()
         with torch.inference_mode():
-            return self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
+            q = self.net.expected_q(torch.from_numpy(obs))
+            return masked_argmax(q, torch.from_numpy(mask)).numpy()
 
     @torch.no_grad()
     def target_distribution(
@@ -296,7 +317,7 @@ class Rainbow(LearnerParts):
     ) -> torch.Tensor:
         """Double-Q, masked: a* = argmax over the next state's feasible actions of the online
         expected Q; project the target network's distribution of (s', a*)."""
-        a_star = masked_argmax(self.net.q_values(next_obs), next_mask)
+        a_star = masked_argmax(self.net.expected_q(next_obs), next_mask)
         p_next = self.target.log_probs_of(next_obs, a_star).exp()
         return project_distribution(p_next, reward, discount, self.net.support)
 

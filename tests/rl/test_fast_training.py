@@ -390,5 +390,39 @@ def test_rainbow_noise_and_q_values():
         assert torch.equal(m.input_epsilon, e_in) and torch.equal(m.bias_epsilon, e_out)
         assert torch.equal(m.weight_epsilon, torch.outer(e_out, e_in))
     obs = torch.randn(9, 5)
-    expect = (net.log_probs(obs).exp() * net.support).sum(-1)
-    assert torch.allclose(net.q_values(obs), expect, atol=1e-5)
+    for training in (True, False):
+        net.train(training)
+        with torch.no_grad():
+            expect = (net.log_probs(obs).exp() * net.support).sum(-1)
+            assert torch.allclose(net.q_values(obs), expect, atol=1e-5)
+            assert torch.allclose(net.expected_q(obs), expect, atol=1e-5)
+
+
+def _plain_projection(probs, reward, discount, support):
+    """The C51 projection in tensor operations (before issue 16)."""
+    v_min, v_max = float(support[0]), float(support[-1])
+    dz = (v_max - v_min) / (len(support) - 1)
+    tz = (reward[:, None] + discount[:, None] * support[None, :]).clamp(v_min, v_max)
+    b = (tz - v_min) / dz
+    lower, upper = b.floor().long(), b.ceil().long()
+    out = torch.zeros_like(probs)
+    out.scatter_add_(1, lower, probs * (upper.to(probs.dtype) - b))
+    out.scatter_add_(1, upper, probs * (b - lower.to(probs.dtype)))
+    out.scatter_add_(1, lower, probs * (lower == upper).to(probs.dtype))
+    return out
+
+
+def test_c51_projection_equals_the_tensor_version():
+    from cdr_bench.rl.rainbow import project_distribution
+
+    g = torch.Generator().manual_seed(12)
+    support = torch.linspace(-20.0, 5.0, 51)
+    probs = torch.softmax(3 * torch.randn(300, 51, generator=g), -1)
+    reward = torch.cat([6 * torch.randn(290, generator=g), torch.tensor([-30.0, 30.0] * 5)])
+    discount = torch.where(torch.rand(300, generator=g) < 0.2, 0.0, 0.97**3)
+    discount[:5] = 1.0  # atoms landing exactly on atoms
+    reward[:5] = 0.0
+    got = project_distribution(probs, reward, discount, support)
+    ref = _plain_projection(probs, reward, discount, support)
+    assert torch.allclose(got, ref, atol=1e-6)
+    assert torch.allclose(got.sum(-1), torch.ones(300), atol=1e-5)
