@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -213,12 +213,12 @@ class RainbowNet(nn.Module):
 
     @torch.no_grad()
     def reset_noise(self, generator: torch.Generator | None = None) -> None:
-        """A new noise sample for every noisy layer: the draws of ``NoisyLinear.reset_noise``
-        layer after layer (the same random stream), scaled in one pass."""
-        layers = [m for m in self.modules() if isinstance(m, NoisyLinear)]
+        """A new noise sample for every noisy layer: one standard normal draw for all of their
+        eps_in and eps_out (layer after layer, in then out), scaled in one pass."""
+        seq = (self.value[0], self.value[2], self.advantage[0], self.advantage[2])
+        layers = cast(list[NoisyLinear], list(seq))
         sizes = [n for m in layers for n in (m.in_features, m.out_features)]
-        draws = torch.cat([torch.randn(n, generator=generator) for n in sizes])
-        f = NoisyLinear.scale_noise(draws).split(sizes)
+        f = NoisyLinear.scale_noise(torch.randn(sum(sizes), generator=generator)).split(sizes)
         for i, m in enumerate(layers):
             m.set_noise(f[2 * i], f[2 * i + 1])
 

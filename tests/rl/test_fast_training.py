@@ -375,18 +375,19 @@ def test_rainbow_rows_of_taken_actions_equal_the_full_head():
 
 
 def test_rainbow_noise_and_q_values():
-    """One draw for the whole network is the layers' draws in order, and the expected Q is
-    the mean of the support under the softmax of the aggregated logits."""
+    """One draw for the whole network, split layer after layer (eps_in, eps_out), factorised
+    as by each layer; and the expected Q is the mean of the support under the softmax of the
+    aggregated logits."""
     from cdr_bench.rl.rainbow import NoisyLinear, RainbowConfig, RainbowNet
 
     torch.manual_seed(10)
     net = RainbowNet(RainbowConfig(obs_dim=5, width=16, n_atoms=7))
     layers = [m for m in net.modules() if isinstance(m, NoisyLinear)]
     net.reset_noise(torch.Generator().manual_seed(11))
-    gen = torch.Generator().manual_seed(11)
-    for m in layers:
-        e_in = NoisyLinear.scale_noise(torch.randn(m.in_features, generator=gen))
-        e_out = NoisyLinear.scale_noise(torch.randn(m.out_features, generator=gen))
+    sizes = [n for m in layers for n in (m.in_features, m.out_features)]
+    draws = torch.randn(sum(sizes), generator=torch.Generator().manual_seed(11)).split(sizes)
+    for i, m in enumerate(layers):
+        e_in, e_out = (NoisyLinear.scale_noise(d.clone()) for d in draws[2 * i : 2 * i + 2])
         assert torch.equal(m.input_epsilon, e_in) and torch.equal(m.bias_epsilon, e_out)
         assert torch.equal(m.weight_epsilon, torch.outer(e_out, e_in))
     obs = torch.randn(9, 5)
