@@ -427,3 +427,22 @@ def test_c51_projection_equals_the_tensor_version():
     ref = _plain_projection(probs, reward, discount, support)
     assert torch.allclose(got, ref, atol=1e-6)
     assert torch.allclose(got.sum(-1), torch.ones(300), atol=1e-5)
+
+
+def test_rainbow_update_is_deterministic():
+    """Same seed, same batches: the same weights bit for bit after a few updates (and acting)."""
+    from cdr_bench.rl.rainbow import Rainbow, RainbowConfig
+
+    def run() -> list[torch.Tensor]:
+        torch.manual_seed(13)
+        learner = Rainbow(RainbowConfig(obs_dim=42, width=32, n_atoms=11))
+        for i in range(3):
+            b = _batch(seed=i)
+            n = len(b["action"])
+            b.update(discount=torch.full((n,), 0.97), weight=torch.rand(n))
+            learner.update(b)
+            learner.act(b["obs"].numpy(), b["mask"].numpy(), True)
+        return [p.detach().clone() for p in learner.net.parameters()]
+
+    a, b = run(), run()
+    assert all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
