@@ -11,6 +11,7 @@ per-episode sums (so learning intruders are resampled as whole episodes).
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -76,6 +77,21 @@ def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any
         return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
 
 
+_LOADED: dict[tuple[str, int, int], tuple[dict[str, Any], list[dict[str, Any]]]] = {}
+
+
+def _load(path: str | os.PathLike[str]) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """A result and its episodes, read (and verified) once per file version: the leaderboard
+    compares each result with many others."""
+    p = Path(path).resolve()
+    st = p.stat() if p.is_file() else None
+    key = (str(p), st.st_mtime_ns if st else -1, st.st_size if st else -1)
+    if key not in _LOADED:
+        result = read_result(path)
+        _LOADED[key] = (result, read_episodes(path, result))
+    return _LOADED[key]
+
+
 def compare(
     path_a: str | os.PathLike[str],
     path_b: str | os.PathLike[str],
@@ -91,7 +107,7 @@ def compare(
     if unknown:
         raise UserError(f"unknown metric(s) {unknown}; known: {', '.join(_METRICS)}")
     try:
-        a, b = read_result(path_a), read_result(path_b)
+        (a, ea), (b, eb) = _load(path_a), _load(path_b)
     except ValueError as e:
         raise UserError(str(e)) from None
     all_a = {s["id"]: s for s in a["scenarios"]}
@@ -125,10 +141,6 @@ def compare(
                     f"({sa[sid][key]} vs {sb[sid][key]}); run both with the same scenario "
                     "version, --episodes and --seed"
                 )
-    try:
-        ea, eb = read_episodes(path_a, a), read_episodes(path_b, b)
-    except ValueError as e:
-        raise UserError(str(e)) from None
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     rows = []
     for sid in sa:

@@ -258,7 +258,8 @@ class Paired:
         self._cache: dict[tuple[str, str, str], dict[str, dict[str, Any]]] = {}
 
     def all(self, a: Entry, b: Entry) -> dict[tuple[str, str], dict[str, Any]]:
-        rows = compare(a.path, b.path)["rows"]
+        shown = list(dict.fromkeys([*(c.key for c in MAIN_COLUMNS), HEADLINE_METRIC]))
+        rows = compare(a.path, b.path, None, shown)["rows"]
         out = {(r["scenario"], r["metric"]): r for r in rows if r["aircraft"] == "ownship"}
         for sid in {k[0] for k in out}:
             self._cache[(a.name, b.name, sid)] = {m: r for (s, m), r in out.items() if s == sid}
