@@ -150,6 +150,12 @@ def _worker(args: argparse.Namespace) -> None:
     timers.wrap(torch.autograd, "backward", "update: backward")
     timers.wrap(torch.optim.Optimizer, "zero_grad", "update: optimizer")
     timers.wrap(torch.optim.Adam, "step", "update: optimizer")
+    networks = importlib.import_module("cdr_bench.rl.networks")
+    if hasattr(networks, "FusedAdam"):  # its own step (the fused kernel called directly)
+        timers.wrap(networks.FusedAdam, "step", "update: optimizer")
+    if hasattr(networks, "FlatParameters"):  # gradients gathered, zeroed and clipped
+        for name in ("zero_grad", "collect_grad", "clip_grad_norm"):
+            timers.wrap(networks.FlatParameters, name, "update: optimizer")
     timers.wrap(torch.nn.utils, "clip_grad_norm_", "update: optimizer")
     timers.wrap(learner_module, "polyak_update", "update: target")
 

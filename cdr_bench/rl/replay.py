@@ -28,25 +28,50 @@ Batch = dict[str, NDArray]
 REWARDS = ("reward", "goal_reward", "safety_reward")
 
 
+def _columns(obs_dim: int, n_actions: int) -> list[tuple[str, np.dtype, tuple[int, ...]]]:
+    return [
+        ("obs", np.dtype(np.float32), (obs_dim,)),
+        ("next_obs", np.dtype(np.float32), (obs_dim,)),
+        ("action", np.dtype(np.int64), ()),
+        ("reward", np.dtype(np.float32), ()),
+        ("goal_reward", np.dtype(np.float32), ()),
+        ("safety_reward", np.dtype(np.float32), ()),
+        ("done", np.dtype(np.float32), ()),
+        ("discount", np.dtype(np.float32), ()),
+        ("mask", np.dtype(np.int8), (n_actions,)),
+        ("next_mask", np.dtype(np.int8), (n_actions,)),
+    ]
+
+
 class ReplayBuffer:
-    """Ring buffer; ``add`` takes a batch of transitions, ``sample`` draws uniformly."""
+    """Ring buffer; ``add`` takes a batch of transitions, ``sample`` draws uniformly.
+
+    A transition is one row of bytes holding every column (:attr:`data` are strided views of
+    the columns), so that drawing a batch is one gather of whole rows (adjacent cache lines)
+    instead of one gather per column; the batch's columns are views of the gathered rows."""
 
     def __init__(self, capacity: int, obs_dim: int, n_actions: int = 27):
         self.capacity = c = int(capacity)
-        self.data: Batch = {
-            "obs": np.zeros((c, obs_dim), np.float32),
-            "mask": np.zeros((c, n_actions), np.int8),
-            "action": np.zeros(c, np.int64),
-            "reward": np.zeros(c, np.float32),
-            "goal_reward": np.zeros(c, np.float32),
-            "safety_reward": np.zeros(c, np.float32),
-            "next_obs": np.zeros((c, obs_dim), np.float32),
-            "next_mask": np.zeros((c, n_actions), np.int8),
-            "done": np.zeros(c, np.float32),
-            "discount": np.zeros(c, np.float32),
-        }
+        self.layout: list[tuple[str, np.dtype, tuple[int, ...], int, tuple[int, ...]]] = []
+        offset = 0
+        for name, dtype, shape in _columns(obs_dim, n_actions):
+            offset = -(-offset // dtype.itemsize) * dtype.itemsize  # aligned
+            inner = (dtype.itemsize,) if shape else ()  # (every column has at most one axis)
+            self.layout.append((name, dtype, shape, offset, inner))
+            offset += dtype.itemsize * int(np.prod(shape, dtype=np.int64))
+        self.row_bytes = -(-offset // 8) * 8  # a multiple of every column's alignment
+        self.storage = np.zeros((c, self.row_bytes), np.uint8)
+        self.data: Batch = self._views(self.storage)
         self.pos = 0
         self.size = 0
+
+    def _views(self, rows: NDArray[np.uint8]) -> Batch:
+        """The columns of ``rows`` (n, row_bytes) as strided views."""
+        n, step = len(rows), self.row_bytes
+        return {
+            name: np.ndarray((n, *shape), dtype, rows, offset, (step, *inner))
+            for name, dtype, shape, offset, inner in self.layout
+        }
 
     def __len__(self) -> int:
         return self.size
@@ -67,10 +92,12 @@ class ReplayBuffer:
         return self.rows(rng.integers(0, self.size, batch))
 
     def rows(self, idx: NDArray[np.integer]) -> Batch:
-        return {k: col[idx] for k, col in self.data.items()}
+        """The transitions in slots ``idx`` (views of one gathered copy)."""
+        return self._views(self.storage[idx])
 
     def state_dict(self) -> dict[str, Any]:
-        return {"data": self.rows(np.arange(self.size)), "pos": self.pos}
+        data = {k: np.ascontiguousarray(v[: self.size]) for k, v in self.data.items()}
+        return {"data": data, "pos": self.pos}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         n = len(state["data"]["action"])
