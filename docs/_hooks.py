@@ -249,7 +249,7 @@ def intro(path: str) -> str:
 def scenario_fields() -> str:
     from cdr_bench.docs import scenario_fields as fields
 
-    return fields()
+    return _escape_brackets(fields())  # ranges such as [0.0, 360.0] are not links
 
 
 GENERATORS = {
