@@ -4,6 +4,7 @@ validates builds a simulator that resets and steps. Bounded to a few seconds."""
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -165,6 +166,9 @@ def test_mutated_shipped_scenarios(data, base):
     from_file = _load_file(text)
     assert (cfg is None) == (from_file is None)
     if cfg is not None:
+        if "id" not in doc:  # a file without an id takes its file name's; a mapping has none
+            assert (cfg.id, from_file.id) == ("", "fuzz")
+            from_file = dataclasses.replace(from_file, id=cfg.id)
         assert from_file.config_hash() == cfg.config_hash()
         _run(cfg)
 
