@@ -290,6 +290,53 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     return head, rows, [ent[r["entry"]]["group"] for r in rk["rows"]]
 
 
+def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
+    """Aggregates over training seeds (``data["seeds"]``), entries in ranking order: the number
+    of seeds, the headline score of each seed, its interquartile mean (IQM) with the
+    stratified-bootstrap interval (none for one seed), the IQM over the tasks, and the
+    probability of improvement over each comparator on those tasks."""
+    sd = data["seeds"]
+    ent = {e["name"]: e for e in data["entries"]}
+    rank = {r["entry"]: r["rank"] for r in data["ranking"]["rows"]}
+    label = {c: ent[c]["display_name"] for c in sd["comparators"]}
+    sc = sd["scenario"]
+    head = [
+        "#",
+        "entry",
+        "seeds",
+        f"clean success on {sc}, per seed",
+        f"IQM over seeds ({sc})",
+        f"IQM over seeds x {len(sd['tasks'])} scenarios",
+        *[f"P(better than {label[c]})" for c in sd["comparators"]],
+    ]
+
+    def iv(m: dict[str, Any]) -> str:
+        return fmt_metric("rate", {"value": m["iqm"], "ci95": m["ci95"]})
+
+    rows: Rows = []
+    for r in sd["rows"]:
+        h, t = r["headline"], r["tasks"]
+        per = " ".join(f"{100 * v:.1f}" for v in h["per_run"])
+        row = [
+            Cell(str(rank[r["entry"]]), rank[r["entry"]]),
+            Cell(ent[r["entry"]]["display_name"], ent[r["entry"]]["display_name"]),
+            Cell(str(h["runs"]), h["runs"]),
+            Cell(per if h["runs"] > 1 else f"{per} (one run)", h["min"]),
+            Cell(iv(h), h["iqm"]),
+            Cell(iv(t), t["iqm"]),
+        ]
+        for c in sd["comparators"]:
+            p = r["p_improvement"].get(c)
+            if p is None:
+                row.append(Cell("-"))
+                continue
+            lo, hi = p["ci95"] or (None, None)
+            txt = f"{p['value']:.2f}" + ("" if lo is None else f" [{lo:.2f}, {hi:.2f}]")
+            row.append(Cell(txt, p["value"]))
+        rows.append(row)
+    return head, rows, [ent[r["entry"]]["group"] for r in sd["rows"]]
+
+
 def tactical_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     """Success per tactical scenario, entries in ranking order: a family's success rate with
     its 95 % interval, a fixed encounter's single outcome (``data["tactical"]``)."""

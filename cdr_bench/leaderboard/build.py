@@ -36,6 +36,7 @@ the committed result files and is never re-measured by ``--check``.
 from __future__ import annotations
 
 import difflib
+import hashlib
 import json
 import os
 import re
@@ -101,6 +102,8 @@ class Options:
     workers: int = 2
     limits: Limits = field(default_factory=Limits)
     reference: str = DEFAULT_REFERENCE
+    all_seeds: bool = False
+    """``--check``: re-evaluate every seed of every entry, not one sampled seed per entry."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -604,6 +607,7 @@ def run(opts: Options) -> int:
 
     if opts.check:
         return _check(opts, lb_dir, root, results_dir, subs, chosen)
+    chosen = with_seeds(chosen)
 
     t0 = time.perf_counter()
     with staging(lb_dir) as stage:
@@ -628,6 +632,25 @@ def run(opts: Options) -> int:
     return 0
 
 
+def with_seeds(subs: list[Submission]) -> list[Submission]:
+    """Each submission followed by its other seeds (:meth:`Submission.seed_views`)."""
+    return [v for s in subs for v in (s, *s.seed_views())]
+
+
+def sampled_seeds(subs: list[Submission]) -> list[Submission]:
+    """Each submission and one of its other seeds: the sample ``--check`` re-evaluates. The seed
+    is picked by a hash of the entry's name and seeds' checkpoints, so a clean clone picks the
+    same one; ``--all-seeds`` checks them all."""
+    out = []
+    for s in subs:
+        out.append(s)
+        views = s.seed_views()
+        if views:
+            key = "|".join([s.name, *(x.checkpoint for x in s.seeds)]).encode()
+            out.append(views[int(hashlib.sha256(key).hexdigest(), 16) % len(views)])
+    return out
+
+
 def _check(
     opts: Options,
     lb_dir: Path,
@@ -648,6 +671,7 @@ def _check(
         )
     diffs: list[str] = []
     notes: list[str] = []
+    chosen = with_seeds(chosen) if opts.all_seeds else sampled_seeds(chosen)
     with staging(lb_dir) as stage:
         fresh = stage / "results"
         fresh.mkdir()

@@ -46,6 +46,12 @@ def register(sub: Any) -> None:
         "committed count; --check: the committed count, or a smaller multiple of 200 to check "
         "the first episodes only)",
     )
+    b.add_argument(
+        "--all-seeds",
+        action="store_true",
+        help="--check: re-evaluate every training seed of every entry (default: the shown seed "
+        "and one other per entry, picked by a hash of the entry)",
+    )
     b.add_argument("--workers", type=int, default=2, help="evaluation processes (2)")
     b.add_argument("--cpu-limit", type=int, default=defaults.cpu_s, help="CPU seconds per process")
     b.add_argument(
@@ -108,6 +114,7 @@ def _build(args: argparse.Namespace) -> int:
         workers=args.workers,
         limits=Limits(cpu_s=args.cpu_limit, memory_mb=args.memory_limit, wall_s=args.timeout),
         reference=args.reference or DEFAULT_REFERENCE,
+        all_seeds=args.all_seeds,
     )
     rc = run(opts)
     if rc == 0 or args.check:

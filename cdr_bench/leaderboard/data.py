@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate import aggregate
 from cdr_bench.evaluate.compare import compare
 from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
@@ -54,7 +55,7 @@ from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
-DATA_VERSION = 2
+DATA_VERSION = 3
 HEADLINE_SCENARIO = "high"
 HEADLINE_METRIC = "clean_success_rate"
 TIE_BREAK = "extra_path_km"
@@ -107,6 +108,9 @@ class Entry:
     episodes: list[dict[str, Any]] = field(default_factory=list)
     """The per-episode records (all scenarios, in file order)."""
     replays: dict[str, Any] | None = None
+    runs: list[tuple[int | None, Entry]] = field(default_factory=list)
+    """Every training seed's scored run ``(seed, entry)``, this one first; ``[(None, self)]``
+    for an entry of one seed."""
 
     @property
     def name(self) -> str:
@@ -194,8 +198,20 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
             if not mp.exists():
                 raise UserError(f"{mp}: missing; run `cdr-bench leaderboard build --evaluate`")
             e.multimodal[sc] = load_multimodal(mp)
+        e.runs = [(sub.seed, e)]
+        for view, seed in zip(
+            sub.seed_views(), [x for x in sub.seeds if x.checkpoint != sub.checkpoint], strict=True
+        ):
+            vp = result_path(results_dir, view.name)
+            if not vp.exists():
+                raise UserError(
+                    f"{vp}: no result file for seed {seed.seed} of {sub.name}; run "
+                    f"`cdr-bench leaderboard build --evaluate {sub.name}`"
+                )
+            r, eps = check_result(view, vp)
+            e.runs.append((seed.seed, Entry(view, vp, r, episodes=eps)))
         entries.append(e)
-    known = {result_path(results_dir, s.name).name for s in subs}
+    known = {result_path(results_dir, v.name).name for s in subs for v in (s, *s.seed_views())}
     stale = sorted(
         p.name
         for p in results_dir.glob("*.json")
@@ -205,7 +221,7 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
     )
     if stale:
         raise UserError(f"{results_dir}: result files without a submission: {', '.join(stale)}")
-    _same_episodes(entries)
+    _same_episodes([r for e in entries for _, r in e.runs])
     return entries
 
 
@@ -529,6 +545,89 @@ def training_info(sub: Submission, root: Path) -> tuple[dict[str, Any] | None, l
     return budget, curves
 
 
+SEED_METRIC = "clean_success_rate"
+"""The score aggregated over training seeds (the headline metric)."""
+
+
+def _runs(e: Entry) -> list[tuple[int | None, Entry]]:
+    return e.runs or [(None, e)]
+
+
+def _seed_counts(e: Entry, sids: list[str]) -> tuple[Any, int]:
+    """Counts ``(runs, tasks)`` of :data:`SEED_METRIC` (the ownship) and their common ``n``."""
+    import numpy as np
+
+    k, ns = [], set()
+    for _, run in _runs(e):
+        row = []
+        for sid in sids:
+            sc = run.scenario(sid)
+            assert sc is not None
+            m = sc["metrics"]["ownship"][SEED_METRIC]
+            row.append(int(m["count"]))
+            ns.add(int(m["n"]))
+        k.append(row)
+    if len(ns) != 1:
+        raise UserError(f"{e.path}: episode counts {sorted(ns)} differ between scenarios or seeds")
+    return np.array(k, dtype=np.int64), ns.pop()
+
+
+def seed_aggregates(
+    entries: list[Entry],
+    order: list[str],
+    headline: str,
+    comparators: tuple[str, ...],
+    fixed: dict[str, bool],
+) -> dict[str, Any]:
+    """Aggregates over training seeds (:mod:`cdr_bench.evaluate.aggregate`, rliable's
+    recommendations): per entry the headline score of every seed, its interquartile mean with a
+    stratified-bootstrap interval (none for one run), the IQM over the tasks (every scenario
+    all entries share but fixed encounters), and the probability of improvement over each
+    comparator on those tasks."""
+    by_name = {e.name: e for e in entries}
+    tasks = [
+        s["id"]
+        for s in entries[0].result["scenarios"]
+        if all(e.scenario(s["id"]) is not None for e in entries) and not fixed[s["id"]]
+    ]
+    comps = [c for c in comparators if c in by_name]
+    rows = []
+    for name in order:
+        e = by_name[name]
+        kh, n = _seed_counts(e, [headline])
+        kt, nt = _seed_counts(e, tasks)
+        seeds = [s for s, _ in _runs(e)]
+        poi = {}
+        for c in comps:
+            if c == name:
+                continue
+            kc, nc = _seed_counts(by_name[c], tasks)
+            if nc != nt:
+                raise UserError(f"{e.path}: {nt} episodes per scenario, {c} has {nc}")
+            ci = aggregate.probability_of_improvement_interval(kt, kc)
+            poi[c] = {
+                "value": round(aggregate.probability_of_improvement(kt, kc), 6),
+                "ci95": None if ci is None else [round(v, 6) for v in ci],
+            }
+        rows.append(
+            {
+                "entry": name,
+                "seeds": seeds,
+                "headline": aggregate.summary(kh, n),
+                "tasks": aggregate.summary(kt, nt),
+                "p_improvement": poi,
+            }
+        )
+    return {
+        "metric": SEED_METRIC,
+        "scenario": headline,
+        "tasks": tasks,
+        "comparators": comps,
+        "resamples": aggregate.RESAMPLES,
+        "rows": rows,
+    }
+
+
 def build_data(
     entries: list[Entry], published: Published, reference: str = DEFAULT_REFERENCE
 ) -> dict[str, Any]:
@@ -700,6 +799,13 @@ def build_data(
             for e in entries
         ],
         "ranking": ranking,
+        "seeds": seed_aggregates(
+            entries,
+            [r["entry"] for r in ranking["rows"]],
+            ranking["scenario"],
+            (BASELINE, reference),
+            fixed_of,
+        ),
         "tables": tables,
         "tactical": tactical,
         "published_vs_measured": side_by_side,

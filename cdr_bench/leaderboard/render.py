@@ -33,6 +33,7 @@ from cdr_bench.evaluate.report import (
     published_table,
     ranking_table,
     scenario_table,
+    seeds_table,
     side_by_side_tables,
     tactical_table,
 )
@@ -82,12 +83,35 @@ TACTICAL_NOTE = (
     "its actions at random, how often the repeated encounter succeeded, without an interval)."
 )
 
+SEEDS_NOTE = (
+    "Training seeds, aggregated as Agarwal et al. (2021) recommend (the `rliable` "
+    "methods): each seed's checkpoint is scored on the same episodes; the interquartile mean "
+    "(IQM: the mean of the middle half of the seeds' scores) of the clean success, with a 95 % "
+    "stratified-bootstrap interval over seeds ({reps:,} resamples; the runs resampled within "
+    "each scenario); the same over every (seed, scenario) of the {ntasks} scenarios "
+    "{tasks}; and the probability of improvement P(X > Y) on those scenarios: the chance that "
+    "a random seed of the entry scores above a random seed of the comparator, averaged over "
+    "the scenarios (ties count one half; 0.5: no difference). A scripted agent is one run; an "
+    "entry trained once shows no interval over seeds (a single run is not a sample of "
+    "training). The ranking above and the per-scenario tables show one seed per entry (its "
+    "`checkpoint`)."
+)
+
 GROUP_LABEL = {
     "scripted": "scripted",
     "learned": "learned",
     "ablation": "ablation",
     "published": "published (paper)",
 }
+
+
+def _seeds_note(data: dict[str, Any]) -> str:
+    sd = data["seeds"]
+    return SEEDS_NOTE.format(
+        reps=sd["resamples"],
+        ntasks=len(sd["tasks"]),
+        tasks=", ".join(f"`{t}`" for t in sd["tasks"]),
+    )
 
 
 def _anchor(sid: str) -> str:
@@ -240,6 +264,8 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
     ]
     title, head, rows = table2_beside(pub, rk["scenario"])
     out += [f"### {title}", "", md_table(head, rows), ""]
+    head, rows, _ = seeds_table(data)
+    out += ["## Seeds", "", _seeds_note(data), "", md_table(head, rows, numeric_from=2), ""]
     if data["tactical"]:
         head, rows, _ = tactical_table(data)
         out += ["## Tactical scenarios", "", TACTICAL_NOTE, "", md_table(head, rows), ""]
@@ -596,7 +622,8 @@ def render_html(
         f"<style>{_CSS}</style></head><body>",
         f'<div id="filter"><strong>Show:</strong> {filt}</div>',
         "<h1>cdr-bench leaderboard</h1>",
-        '<nav><a href="#ranking">Ranking</a><a href="#tactical">Tactical</a>'
+        '<nav><a href="#ranking">Ranking</a><a href="#seeds">Seeds</a>'
+        '<a href="#tactical">Tactical</a>'
         '<a href="#replays">Replays</a><a href="#measured">Per scenario</a>'
         '<a href="#plots">Plots</a><a href="#entries">Entries</a>'
         '<a href="#published">Published (paper)</a><a href="#side-by-side">Published vs '
@@ -618,6 +645,12 @@ def render_html(
         f"<h3>{_esc(title)}</h3>",
         html_table("table-published-beside", head, rows, "published"),
         "</section>",
+    ]
+    head, rows, groups = seeds_table(data)
+    b += [
+        '<h2 id="seeds">Seeds</h2>',
+        f'<p class="note">{inline_md(_seeds_note(data))}</p>',
+        html_table("table-seeds", head, rows, groups=groups),
     ]
     if data["tactical"]:
         head, rows, groups = tactical_table(data)

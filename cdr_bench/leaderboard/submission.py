@@ -20,6 +20,20 @@ A learned entry also names its training logs (``training_logs``: one JSON-lines 
 the budget and seed columns and the learning curves are read from them) and, when it is an
 ablation of another entry, ``group: ablation``.
 
+An entry trained with several seeds lists them all (``seeds``), each with its checkpoint and log;
+``checkpoint`` names the seed whose episodes the per-episode views show (replays, multimodality,
+the paired tests). Every seed is scored on the same episodes (``results/<name>.json`` for that
+seed, ``results/<name>.seed-<k>.json`` for the others) and the leaderboard aggregates them::
+
+    checkpoint: agents/ppo/seeds/1/checkpoint.pt
+    seeds:
+      - seed: 1
+        checkpoint: agents/ppo/seeds/1/checkpoint.pt
+        training_log: agents/ppo/seeds/1/training_log.jsonl
+      - seed: 2
+        checkpoint: agents/ppo/seeds/2/checkpoint.pt
+        training_log: agents/ppo/seeds/2/training_log.jsonl
+
 Paths (``agent``, ``checkpoint``, a ``reference`` that is not a URL) are relative to the
 repository root, i.e. the folder holding ``leaderboard/``, and must stay inside it.
 """
@@ -29,7 +43,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +68,15 @@ class SubmissionError(UserError):
         self.source = str(source)
         self.field = field
         super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+
+
+@dataclass(frozen=True)
+class Seed:
+    """One training seed of an entry: its checkpoint and its training log (repository paths)."""
+
+    seed: int
+    checkpoint: str
+    training_log: str
 
 
 @dataclass(frozen=True)
@@ -92,6 +115,37 @@ class Submission:
     """Declared ``(transitions, seeds)`` of an entry whose logs are not in the repository."""
     replays: tuple[str, ...] = ()
     """Scenarios whose first episodes are recorded as trajectories and replayed on the page."""
+    seeds: tuple[Seed, ...] = ()
+    """Every training seed (empty: one seed, ``checkpoint``); one has ``checkpoint``."""
+
+    @property
+    def seed(self) -> int | None:
+        """The seed of ``checkpoint`` (``None`` without ``seeds``)."""
+        return next((s.seed for s in self.seeds if s.checkpoint == self.checkpoint), None)
+
+    def seed_views(self) -> list[Submission]:
+        """The other seeds, each as a submission scored like this one (same agent, scenarios and
+        episodes) under the name ``<name>.seed-<k>``, without per-episode extras."""
+        return [
+            replace(
+                self,
+                name=seed_result_name(self.name, s.seed),
+                checkpoint=s.checkpoint,
+                training_logs=(s.training_log,),
+                multimodality=(),
+                replays=(),
+                published_as=None,
+                budget=None,
+                seeds=(),
+            )
+            for s in self.seeds
+            if s.checkpoint != self.checkpoint
+        ]
+
+
+def seed_result_name(name: str, seed: int) -> str:
+    """The result stem of an entry's seed other than its ``checkpoint``."""
+    return f"{name}.seed-{seed}"
 
 
 def _str(src: Path, field: str, v: Any, *, allow_none: bool = False) -> str | None:
@@ -194,6 +248,12 @@ FIELDS: dict[str, tuple[bool, str]] = {
     "replays": (
         False,
         "scenarios whose first episodes are recorded and replayed side by side on index.html",
+    ),
+    "seeds": (
+        False,
+        "every training seed: a list of {seed: K, checkpoint: FILE, training_log: FILE.jsonl}; "
+        "`checkpoint` is one of them (the seed the per-episode views show), `training_logs` is "
+        "then not given",
     ),
 }
 """Every key of a submission file: ``name -> (required, meaning)``."""
@@ -308,6 +368,27 @@ def load_submission(
     if len(set(replays)) != len(replays):
         raise SubmissionError(src, "replays", f"a scenario is listed twice: {list(replays)}")
 
+    seeds = _seeds(src, data.get("seeds"), root)
+    if seeds:
+        if training is None:
+            raise SubmissionError(src, "seeds", "a scripted entry has no training seeds")
+        if "training_logs" in data:
+            raise SubmissionError(
+                src, "training_logs", "not given with seeds (each seed names its training_log)"
+            )
+        if checkpoint not in {s.checkpoint for s in seeds}:
+            raise SubmissionError(
+                src,
+                "checkpoint",
+                f"expected one of the seeds' checkpoints "
+                f"({', '.join(s.checkpoint for s in seeds)}), got {checkpoint}",
+            )
+        logs = tuple(s.training_log for s in seeds)
+        if budget is not None and budget[1] != len(seeds):
+            raise SubmissionError(
+                src, "budget", f"declares {budget[1]} seed(s), seeds lists {len(seeds)}"
+            )
+
     return Submission(
         name=name,
         source=src,
@@ -326,7 +407,50 @@ def load_submission(
         training_logs=logs,
         budget=budget,
         replays=replays,
+        seeds=seeds,
     )
+
+
+def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
+    if v is None:
+        return ()
+    if not isinstance(v, list) or len(v) < 2:
+        raise SubmissionError(
+            src,
+            "seeds",
+            f"expected a list of two or more {{seed, checkpoint, training_log}}, got {v!r}",
+        )
+    out: list[Seed] = []
+    for i, item in enumerate(v):
+        f = f"seeds[{i}]"
+        if not isinstance(item, dict) or set(item) != {"seed", "checkpoint", "training_log"}:
+            raise SubmissionError(
+                src,
+                f,
+                f"expected {{seed: K, checkpoint: FILE, training_log: FILE.jsonl}}, got {item!r}",
+            )
+        k = item["seed"]
+        if not isinstance(k, int) or isinstance(k, bool) or k < 0:
+            raise SubmissionError(src, f"{f}.seed", f"expected a non-negative integer, got {k!r}")
+        ck = _str(src, f"{f}.checkpoint", item["checkpoint"])
+        log = _str(src, f"{f}.training_log", item["training_log"])
+        assert ck is not None and log is not None
+        full = _repo_path(src, f"{f}.checkpoint", ck, root)
+        if not full.is_file() or full.suffix not in CHECKPOINT_SUFFIXES:
+            raise SubmissionError(
+                src,
+                f"{f}.checkpoint",
+                f"expected a file ending in {', '.join(CHECKPOINT_SUFFIXES)}, got {ck}",
+            )
+        full = _repo_path(src, f"{f}.training_log", log, root)
+        if not full.is_file() or full.suffix != ".jsonl":
+            raise SubmissionError(src, f"{f}.training_log", f"expected a .jsonl file, got {log}")
+        out.append(Seed(k, ck, log))
+    for key in ("seed", "checkpoint", "training_log"):
+        vals = [getattr(s, key) for s in out]
+        if len(set(vals)) != len(vals):
+            raise SubmissionError(src, "seeds", f"a {key} is listed twice: {vals}")
+    return tuple(out)
 
 
 def _budget(src: Path, v: Any) -> tuple[int, int] | None:

@@ -1,6 +1,7 @@
 """A miniature repository with a leaderboard: two agents (``direct``, scripted, and a ``weave``
 agent that turns toward its goal while alternating climbs and descents, declared learned with
-two fabricated training logs), their submissions (both replaying the tactical head-on family
+two training seeds: two checkpoints that set the period of its climbs and descents, and two
+fabricated training logs), their submissions (both replaying the tactical head-on family
 and its fixed encounter), the published tables, and result files written once per session by
 the real ``build --evaluate`` (sandboxed subprocesses, 8 episodes per scenario)."""
 
@@ -13,6 +14,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -20,11 +22,15 @@ EPISODES = 8
 
 WEAVE_AGENT = textwrap.dedent(
     """
+    import os
+
     import numpy as np
 
     class Agent:
         def __init__(self, observation_space, action_space):
             self.t = 0
+            ck = os.environ.get("CDR_BENCH_CHECKPOINT")
+            self.period = int(np.load(ck)["period"]) if ck else 4
 
         def reset(self, seed):
             self.t = 0
@@ -37,13 +43,17 @@ WEAVE_AGENT = textwrap.dedent(
             self.t += 1
             rel = np.degrees(np.arctan2(observations[:, 9], observations[:, 10]))
             psi = np.where(rel > 2.5, 1, np.where(rel < -2.5, -1, 0))
-            h = 1 if (self.t // 4) % 2 else -1
+            h = 1 if (self.t // self.period) % 2 else -1
             a = 9 * (psi + 1) + 3 + (h + 1)
             return np.where(masks[np.arange(len(a)), a] == 1, a, 9 * (psi + 1) + 4)
     """
 )
 
 
+WEAVE_SEEDS = (
+    "[{seed: 1, checkpoint: agents/weave/seed-1.npz, training_log: agents/weave/log-1.jsonl}, "
+    "{seed: 2, checkpoint: agents/weave/seed-2.npz, training_log: agents/weave/log-2.jsonl}]"
+)
 SCENARIOS = ("low", "high", "tactical/head-on", "tactical/head-on-fixed")
 REPLAYS = "[tactical/head-on, tactical/head-on-fixed]"
 
@@ -88,6 +98,7 @@ def make_repo(root: Path) -> Path:
         (root / "agents" / "weave" / f"log-{seed}.jsonl").write_text(
             "".join(json.dumps(r) + "\n" for r in log)
         )
+        np.savez(root / "agents" / "weave" / f"seed-{seed}.npz", period=np.array(2 + 2 * seed))
     (lb / "submissions" / "direct.yaml").write_text(
         submission_yaml("agents/direct/agent.py", display_name="Direct", replays=REPLAYS)
     )
@@ -97,7 +108,8 @@ def make_repo(root: Path) -> Path:
             training="python -m weave.train",
             display_name="Weave",
             published_as="PPO",
-            training_logs="[agents/weave/log-1.jsonl, agents/weave/log-2.jsonl]",
+            checkpoint="agents/weave/seed-1.npz",
+            seeds=WEAVE_SEEDS,
             replays=REPLAYS,
         )
     )

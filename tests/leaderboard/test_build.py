@@ -295,3 +295,39 @@ def test_check_names_agent_files_changed_since_evaluation(repo: Path) -> None:
     assert "results/direct.json: the agent's files changed" in r.stderr
     assert "changed: agent.py" in r.stderr
     assert "--evaluate direct" in r.stderr
+
+
+def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> None:
+    lb = repo / "leaderboard"
+    res = lb / "results"
+    assert (res / "weave.json").exists() and (res / "weave.seed-2.json").exists()
+    assert not (res / "weave.seed-2.replays.json").exists()  # per-episode extras: shown seed only
+    one, two = (json.loads((res / f).read_text()) for f in ("weave.json", "weave.seed-2.json"))
+    assert [s["seeds_sha256"] for s in one["scenarios"]] == [
+        s["seeds_sha256"] for s in two["scenarios"]
+    ]
+    assert one["agent"]["sha256"] != two["agent"]["sha256"]  # the checkpoint is in the identity
+    data = json.loads((lb / "leaderboard.json").read_text())
+    rows = {r["entry"]: r for r in data["seeds"]["rows"]}
+    w, d = rows["weave"], rows["direct"]
+    assert w["seeds"] == [1, 2] and w["headline"]["runs"] == 2
+    assert d["seeds"] == [None] and d["headline"]["ci95"] is None  # one run: no interval
+    hi = {s["id"]: s for s in one["scenarios"]}["high"]["metrics"]["ownship"]
+    hi2 = {s["id"]: s for s in two["scenarios"]}["high"]["metrics"]["ownship"]
+    per = [hi["clean_success_rate"]["value"], hi2["clean_success_rate"]["value"]]
+    assert w["headline"]["per_run"] == per
+    assert w["headline"]["iqm"] == pytest.approx(sum(per) / 2)  # 2 runs: nothing trimmed
+    assert "## Seeds" in (lb / "README.md").read_text()
+    assert 'id="table-seeds"' in (lb / "index.html").read_text()
+    # a seed's result tampered with: the check fails naming the file; a missing one is an error
+    p = res / "weave.seed-2.json"
+    r2 = json.loads(p.read_text())
+    m = r2["scenarios"][0]["metrics"]["ownship"]["success_rate"]
+    m["value"] = 1.0 if m["value"] != 1.0 else 0.0
+    p.write_text(json.dumps(r2, indent=1) + "\n")
+    r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
+    assert r.returncode == 1 and "weave.seed-2.json" in r.stderr, r.stderr
+    p.unlink()
+    (res / "weave.seed-2.jsonl").unlink()
+    r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
+    assert r.returncode == 2 and "no result file for seed 2 of weave" in r.stderr

@@ -11,9 +11,19 @@ import pytest
 
 from cdr_bench.leaderboard.published import load_published
 from cdr_bench.leaderboard.submission import SubmissionError, load_submission, load_submissions
-from tests.leaderboard.conftest import ROOT, SCENARIOS, cdr, make_repo, submission_yaml
+from tests.leaderboard.conftest import (
+    ROOT,
+    SCENARIOS,
+    WEAVE_SEEDS,
+    cdr,
+    make_repo,
+    submission_yaml,
+)
 
 GOOD = submission_yaml("agents/direct/agent.py")
+LEARNED = submission_yaml(
+    "agents/weave", training="python t.py", checkpoint="agents/weave/seed-1.npz"
+)
 
 
 @pytest.fixture
@@ -116,6 +126,57 @@ BAD = {
         "not one of this entry's scenarios",
     ),
     "bad yaml": ("agent: [unclosed\n", "", "not valid YAML"),
+    "seeds of a scripted entry": (
+        GOOD + f"seeds: {WEAVE_SEEDS}\n",
+        "seeds",
+        "scripted entry has no training seeds",
+    ),
+    "one seed": (
+        LEARNED + "seeds: [{seed: 1, checkpoint: agents/weave/seed-1.npz, "
+        "training_log: agents/weave/log-1.jsonl}]\n",
+        "seeds",
+        "two or more",
+    ),
+    "seed keys": (
+        LEARNED + "seeds: [{seed: 1, checkpoint: agents/weave/seed-1.npz}, {seed: 2}]\n",
+        "seeds[0]",
+        "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl}",
+    ),
+    "seed number": (
+        LEARNED + f"seeds: {WEAVE_SEEDS.replace('seed: 2', 'seed: two')}\n",
+        "seeds[1].seed",
+        "non-negative integer",
+    ),
+    "seed twice": (
+        LEARNED + f"seeds: {WEAVE_SEEDS.replace('seed: 2', 'seed: 1')}\n",
+        "seeds",
+        "a seed is listed twice",
+    ),
+    "seed checkpoint missing": (
+        LEARNED + f"seeds: {WEAVE_SEEDS.replace('seed-2.npz', 'seed-9.npz')}\n",
+        "seeds[1].checkpoint",
+        "does not exist",
+    ),
+    "seed log not jsonl": (
+        LEARNED + f"seeds: {WEAVE_SEEDS.replace('log-2.jsonl', 'seed-2.npz')}\n",
+        "seeds[1].training_log",
+        "expected a .jsonl file",
+    ),
+    "checkpoint not a seed": (
+        LEARNED.replace("seed-1.npz", "other.npz") + f"seeds: {WEAVE_SEEDS}\n",
+        "checkpoint",
+        "expected one of the seeds' checkpoints",
+    ),
+    "seeds and training_logs": (
+        LEARNED + f"seeds: {WEAVE_SEEDS}\ntraining_logs: [agents/weave/log-1.jsonl]\n",
+        "training_logs",
+        "not given with seeds",
+    ),
+    "seeds against budget": (
+        LEARNED + f"seeds: {WEAVE_SEEDS}\nbudget: {{transitions: 10000, seeds: 3}}\n",
+        "budget",
+        "declares 3 seed(s), seeds lists 2",
+    ),
 }
 
 
@@ -124,6 +185,7 @@ def test_bad_submission_names_file_and_field(lb: Path, case: str) -> None:
     text, field, what = BAD[case]
     (lb.parent / "agents" / "direct" / "model.pkl").write_bytes(b"x")
     (lb.parent / "agents" / "direct" / "model.pt").write_bytes(b"x")
+    (lb.parent / "agents" / "weave" / "other.npz").write_bytes(b"x")
     p = write(lb, text)
     with pytest.raises(SubmissionError) as e:
         load_submission(p, lb.parent, load_published(lb).names)
@@ -143,6 +205,17 @@ def test_learned_submission_fields(lb: Path) -> None:
     assert s.budget == (10000, 1) and s.replays == ("tactical/head-on",)
     s = load_submission(write(lb, GOOD.replace("training: null", "training: x")), lb.parent)
     assert s.group == "learned"  # the default with a training command
+
+
+def test_seeds(lb: Path) -> None:
+    s = load_submission(write(lb, LEARNED + f"seeds: {WEAVE_SEEDS}\n"), lb.parent)
+    assert [x.seed for x in s.seeds] == [1, 2] and s.seed == 1
+    assert s.training_logs == ("agents/weave/log-1.jsonl", "agents/weave/log-2.jsonl")
+    (view,) = s.seed_views()
+    assert view.name == "entry.seed-2" and view.checkpoint == "agents/weave/seed-2.npz"
+    assert view.training_logs == ("agents/weave/log-2.jsonl",)
+    assert view.replays == () and view.multimodality == () and view.published_as is None
+    assert view.scenarios == s.scenarios and view.agent == s.agent
 
 
 def test_bad_file_name(lb: Path) -> None:
