@@ -337,6 +337,23 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     return head, rows, [ent[r["entry"]]["group"] for r in sd["rows"]]
 
 
+def claims_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
+    """The paper's claims beside our measurement and the verdict (``data["claims"]``)."""
+    head = ["claim of the paper", "where", "published", "measured here", "verdict", "decided by"]
+    rows: Rows = [
+        [
+            Cell(c["claim"]),
+            Cell(c["source"]),
+            Cell(c["published"]),
+            Cell(c["measured"]),
+            Cell(c["verdict"], c["verdict"], c["verdict"] == "held"),
+            Cell(c["test"]),
+        ]
+        for c in data.get("claims", [])
+    ]
+    return head, rows
+
+
 def tactical_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     """Success per tactical scenario, entries in ranking order: a family's success rate with
     its 95 % interval, a fixed encounter's single outcome (``data["tactical"]``)."""

@@ -50,6 +50,8 @@ from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
 from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
 from cdr_bench.evaluate.results import read_episodes, read_result
+from cdr_bench.leaderboard.claims import SCENARIO as CLAIMS_SCENARIO
+from cdr_bench.leaderboard.claims import build_claims
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
 from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
@@ -284,17 +286,28 @@ class Paired:
     def get(self, a: Entry, b: Entry, sid: str) -> dict[str, dict[str, Any]]:
         """The headline metric's difference b - a on ``sid`` (every metric if :meth:`all` of
         the pair ran before)."""
+        return self._get(a, b, sid, HEADLINE_METRIC)
+
+    def metric(self, a: Entry, b: Entry, sid: str, metric: str) -> dict[str, Any]:
+        """One metric's paired difference b - a on ``sid``."""
+        return self._get(a, b, sid, metric)[metric]
+
+    def _get(self, a: Entry, b: Entry, sid: str, metric: str) -> dict[str, dict[str, Any]]:
         key = (a.name, b.name, sid)
-        if key not in self._cache:
-            back = self._cache.get((b.name, a.name, sid))
-            if back is not None:  # the same resampled episodes: b - a = -(a - b)
-                self._cache[key] = {
-                    m: {**r, "diff": -r["diff"], "ci95": [-r["ci95"][1], -r["ci95"][0]]}
-                    for m, r in back.items()
-                }
+        if metric not in self._cache.get(key, {}):
+            back = self._cache.get((b.name, a.name, sid), {})
+            if metric in back:  # the same resampled episodes: b - a = -(a - b)
+                self._cache.setdefault(key, {}).update(
+                    {
+                        m: {**r, "diff": -r["diff"], "ci95": [-r["ci95"][1], -r["ci95"][0]]}
+                        for m, r in back.items()
+                    }
+                )
             else:
-                rows = compare(a.path, b.path, [sid], [HEADLINE_METRIC])["rows"]
-                self._cache[key] = {r["metric"]: r for r in rows if r["aircraft"] == "ownship"}
+                rows = compare(a.path, b.path, [sid], [metric])["rows"]
+                self._cache.setdefault(key, {}).update(
+                    {r["metric"]: r for r in rows if r["aircraft"] == "ownship"}
+                )
         return self._cache[key]
 
 
@@ -805,6 +818,24 @@ def build_data(
             ranking["scenario"],
             (BASELINE, reference),
             fixed_of,
+        ),
+        "claims": build_claims(
+            {e.sub.published_as: e for e in entries if e.sub.published_as},
+            paired,
+            published,
+            {
+                (e.name, sc): d["families_mean"]
+                for e in entries
+                for sc, d in e.multimodal.items()
+                if d.get("families_mean") is not None
+            },
+            {
+                e.name: e.result["timing"]["decision_latency"][CLAIMS_SCENARIO]["per_decision_ms"][
+                    "median"
+                ]
+                for e in entries
+                if CLAIMS_SCENARIO in e.result["timing"]["decision_latency"]
+            },
         ),
         "tables": tables,
         "tactical": tactical,

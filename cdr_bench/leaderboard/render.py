@@ -24,6 +24,7 @@ from cdr_bench.evaluate.report import (
     HIGHER,
     LOWER,
     Rows,
+    claims_table,
     entries_table,
     fmt_metric,
     fmt_value,
@@ -95,6 +96,14 @@ SEEDS_NOTE = (
     "entry trained once shows no interval over seeds (a single run is not a sample of "
     "training). The ranking above and the per-scenario tables show one seed per entry (its "
     "`checkpoint`)."
+)
+
+CLAIMS_NOTE = (
+    "Every claim of the paper that cdr-bench can test, beside our measurement, with the rule "
+    "that decides it (fixed in `cdr_bench/leaderboard/claims.py` before the numbers). The "
+    "paper's numbers come from its own simulator, so a number outside our interval says that "
+    "this benchmark does not reproduce it, not that the paper mis-measured its own. Measured on "
+    "the seed each entry shows; reduced budgets are named."
 )
 
 GROUP_LABEL = {
@@ -266,6 +275,8 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
     out += [f"### {title}", "", md_table(head, rows), ""]
     head, rows, _ = seeds_table(data)
     out += ["## Seeds", "", _seeds_note(data), "", md_table(head, rows, numeric_from=2), ""]
+    head, rows = claims_table(data)
+    out += ["## Claims of the paper", "", CLAIMS_NOTE, "", md_table(head, rows, numeric_from=9), ""]
     if data["tactical"]:
         head, rows, _ = tactical_table(data)
         out += ["## Tactical scenarios", "", TACTICAL_NOTE, "", md_table(head, rows), ""]
@@ -622,7 +633,7 @@ def render_html(
         f"<style>{_CSS}</style></head><body>",
         f'<div id="filter"><strong>Show:</strong> {filt}</div>',
         "<h1>cdr-bench leaderboard</h1>",
-        '<nav><a href="#ranking">Ranking</a><a href="#seeds">Seeds</a>'
+        '<nav><a href="#ranking">Ranking</a><a href="#seeds">Seeds</a><a href="#claims">Claims</a>'
         '<a href="#tactical">Tactical</a>'
         '<a href="#replays">Replays</a><a href="#measured">Per scenario</a>'
         '<a href="#plots">Plots</a><a href="#entries">Entries</a>'
@@ -651,6 +662,12 @@ def render_html(
         '<h2 id="seeds">Seeds</h2>',
         f'<p class="note">{inline_md(_seeds_note(data))}</p>',
         html_table("table-seeds", head, rows, groups=groups),
+    ]
+    head, rows = claims_table(data)
+    b += [
+        '<h2 id="claims">Claims of the paper</h2>',
+        f'<p class="note">{inline_md(CLAIMS_NOTE)}</p>',
+        html_table("table-claims", head, rows),
     ]
     if data["tactical"]:
         head, rows, groups = tactical_table(data)

@@ -210,11 +210,19 @@ def headline(repo: Repo) -> str:
     return "\n\n".join([*conclusion(data), report.md_table(head, rows, numeric_from=3)])
 
 
+def claims(repo: Repo) -> str:
+    """The paper's claims and our verdicts, from the committed ``leaderboard.json``."""
+    data = _read_json(repo.lb_dir / "leaderboard.json")
+    head, rows = report.claims_table(data)
+    return report.md_table(head, rows, numeric_from=len(head))
+
+
 Block = Callable[[Repo], str]
 
 DOC_BLOCKS: dict[str, dict[str, Block]] = {
     "README.md": {
         "headline": headline,
+        "claims": claims,
         "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
         "reference-agents": lambda r: measured(r, CLASSICAL, ci=False),
         "multimodality": lambda r: multimodality(r, MULTIMODAL),
