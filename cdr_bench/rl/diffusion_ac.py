@@ -101,6 +101,10 @@ class UpdateConfig:
     ce_input: str = "y0"
     """terminal CE input: "y0" = D(s, y0, 0) as in Eq. 39 (clean teacher logits as input, can be
     satisfied by copying), "noise" = D(s, y_T ~ N(0, I), T) (the inference input), "none" = no CE"""
+    q_target_max: float = math.inf
+    """upper clip of the critics' TD target (inf: none). Every return of the benchmark's reward is
+    at most the goal term (1.0; docs/model.md §6, bounded returns), so a target above it is an
+    overestimate by construction; 1.0 removes that part of the critics' feedback loop"""
     diffusion_target: str = "teacher"
     """regression target of the denoiser: "teacher" = y0 = log(p* + eps/27), Eq. 38 (one
     deterministic vector per state, so the optimal denoiser ignores y_t and the argmax policy is
@@ -189,6 +193,9 @@ class DiffusionAC(LearnerParts):
         with torch.no_grad():
             q_next = masked_logits(self.critic_target.min_q(b["next_obs"]), b["next_mask"])
             y = b["reward"] + u.gamma * (1 - b["done"]) * q_next.max(-1).values
+            y_max = y.max().item()
+            if u.q_target_max != math.inf:
+                y = y.clamp(max=u.q_target_max)
         q1, q2 = self.critic(obs)
         q1a = q1.gather(1, a[:, None]).squeeze(1)
         q2a = q2.gather(1, a[:, None]).squeeze(1)
@@ -201,7 +208,12 @@ class DiffusionAC(LearnerParts):
         self.opt_critic.step()
         # (B) teacher (Eq. 37-38) with the updated critics held fixed.
         p_star = self.teacher(obs, mask, tau)
-        stats = {"loss_q": loss_q.item(), "q_mean": q1a.mean().item()}
+        stats = {
+            "loss_q": loss_q.item(),
+            "q_mean": q1a.mean().item(),
+            "q_max": q1a.max().item(),
+            "target_max": y_max,
+        }
         loss_pi, actor_stats = self.actor_loss(obs, mask, p_star)
         stats.update(actor_stats)
         self.flat_actor.zero_grad()

@@ -75,6 +75,9 @@ class Args(OffPolicyArgs):
     """Adam step size of the denoiser"""
     lr_critic: float = 1e-3
     """Adam step size of the critics"""
+    q_target_max: float = math.inf
+    """clip the critics' TD target at this value (inf: off; 1.0 = the largest return the reward
+    allows, the goal term)"""
     explore: str = "sample"
     """action selection while training: "sample" from the masked softmax or "argmax" (paper)"""
     extra: dict = field(default_factory=dict)
