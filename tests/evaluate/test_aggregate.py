@@ -64,9 +64,7 @@ def test_stratified_bootstrap_resamples_within_tasks():
     # brute force: with 3 runs of one task (nothing cut) a resampled IQM is the mean of one of
     # the 27 ordered draws; the 95 % interval lies within them
     k1 = np.array([[2], [9], [15]])
-    vals = sorted(
-        float(Fraction(sum(d), 3 * 20)) for d in itertools.product([2, 9, 15], repeat=3)
-    )
+    vals = sorted(float(Fraction(sum(d), 3 * 20)) for d in itertools.product([2, 9, 15], repeat=3))
     lo, hi = agg.iqm_interval(k1, 20, reps=4000)
     assert vals[0] <= lo <= hi <= vals[-1] and lo < agg.iqm(k1, 20) < hi
 
