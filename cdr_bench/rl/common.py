@@ -57,6 +57,9 @@ class TrainArgs:
     """training-only extra penalty when a flight ends in LoS/NMAC (0 = literal reward)"""
     max_episode_steps: int = 200
     """training-only episode cut (bootstrapped, counted as a failure); 0 = scenario horizon"""
+    los_penalty: float = 0.0
+    """training-only extra penalty per step and per aircraft in LoS or NMAC with the controlled
+    aircraft (0 = the scenario's own weights only)"""
     curriculum: bool = True
     """DPSC on (stages 1..12) or off (train on ``scenario``)"""
     window: int = 100
@@ -83,6 +86,7 @@ def training_env(args: TrainArgs) -> CurriculumEnv:
         curriculum=Curriculum(args.window, args.promote_at) if args.curriculum else None,
         failure_penalty=args.failure_penalty,
         max_episode_steps=args.max_episode_steps,
+        los_penalty=args.los_penalty,
     )
 
 

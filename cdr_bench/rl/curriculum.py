@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cdr_bench.sim.core import BOUNDARY, LOS, NMAC, SUCCESS, StepResult
+from cdr_bench.sim.core import BOUNDARY, LOS, NMAC, REWARD_TERMS, SUCCESS, StepResult
 from cdr_bench.vector_env import VectorEnv
 
 N_STAGES = 12
@@ -111,6 +111,9 @@ class CurriculumEnv:
       in LoS, NMAC or ``boundary``. With the paper's reward the path term (-(d_goal/400 km)^2
       per step) sums to several units over a crossing, far more than the -0.5 of a LoS that
       ends a curriculum episode, so a literal agent is paid to end episodes by conflict.
+    * ``los_penalty`` (>= 0) is subtracted, every step, per aircraft the controlled aircraft is
+      in LoS or NMAC with (the counts of the step's ``los`` and ``nmac`` terms), on top of the
+      scenario's own weights: a lever on the benchmark's headline, which counts any LoS.
     * ``max_episode_steps`` ends an episode after that many steps
       (:meth:`VectorEnv.end_episodes`: the aircraft still flying get the ``timeout`` outcome and
       a truncation, which bootstraps).
@@ -127,6 +130,7 @@ class CurriculumEnv:
         curriculum: Curriculum | None = None,
         failure_penalty: float = 0.0,
         max_episode_steps: int = 0,
+        los_penalty: float = 0.0,
         **overrides: Any,
     ):
         self.num_envs, self.overrides = num_envs, overrides
@@ -135,6 +139,7 @@ class CurriculumEnv:
         self.fixed_scenario = scenario
         self.failure_penalty = failure_penalty
         self.max_episode_steps = max_episode_steps
+        self.los_penalty = los_penalty
         self.episodes = 0
         self.recent: deque[int] = deque(maxlen=100)  # outcome codes of the last episodes
         self.outcomes: list[int] = []  # outcome codes of the episodes ended since the last read
@@ -185,6 +190,8 @@ class CurriculumEnv:
         res = st.result
         failed = (res.outcome == LOS) | (res.outcome == NMAC) | (res.outcome == BOUNDARY)
         penalty = self.failure_penalty * failed
+        if self.los_penalty:
+            penalty = penalty + self.los_penalty * self._separation_counts(res)
         truncated = st.truncated
         if self.max_episode_steps:
             cut = np.flatnonzero((sim.steps >= self.max_episode_steps) & sim.ac_active.any(axis=1))
@@ -225,6 +232,20 @@ class CurriculumEnv:
             episode_done=episode_done,
             promoted=promoted,
         )
+
+    def _separation_counts(self, res: StepResult) -> NDArray[np.float64]:
+        """(E, M) aircraft each controlled aircraft was in LoS or NMAC with during the step,
+        recovered from the step's ``los`` and ``nmac`` terms and the scenario's weights."""
+        w = self.config.reward
+        out = np.zeros(res.reward.shape)
+        for term, weight in (("los", w.los), ("nmac", w.nmac)):
+            if weight <= 0:
+                raise ValueError(
+                    f"los_penalty needs a positive reward.{term} weight in {self.scenario} to "
+                    f"count the aircraft in conflict (got {weight})"
+                )
+            out += np.rint(-res.terms[..., REWARD_TERMS.index(term)] / weight)
+        return out
 
     # -- statistics and state --------------------------------------------------------------------
 

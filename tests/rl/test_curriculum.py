@@ -77,3 +77,25 @@ def test_saved_state_continues_exactly():
         assert np.array_equal(sa.obs, sb.obs) and np.array_equal(sa.reward, sb.reward)
         assert sa.promoted == sb.promoted
     assert a.stage == b.stage > 4 and a.take_outcomes() == b.take_outcomes()
+
+
+def test_los_penalty_counts_the_aircraft_in_conflict():
+    """The extra training penalty is los_penalty x (aircraft in LoS or NMAC with the ownship this
+    step), recovered from the step's own los and nmac terms; the same episodes otherwise."""
+    from cdr_bench.sim.core import REWARD_TERMS
+
+    kw = dict(seed=3, scenario="high", max_episode_steps=40)
+    a, b = CurriculumEnv(8, **kw), CurriculumEnv(8, los_penalty=2.0, **kw)
+    rng = np.random.default_rng(5)
+    hit = 0
+    for _ in range(60):
+        act = rng.integers(0, 27, a.flying.shape)
+        sa, sb = a.step(act), b.step(act)
+        ra = sa.result
+        assert np.array_equal(ra.outcome, sb.result.outcome)  # the penalty changes no dynamics
+        n = np.rint(-ra.terms[..., REWARD_TERMS.index("los")] / 0.5) + np.rint(
+            -ra.terms[..., REWARD_TERMS.index("nmac")] / 1.0
+        )
+        assert np.array_equal(sb.reward, sa.reward - 2.0 * n)
+        hit += int((n > 0).sum())
+    assert hit > 0  # random flight at high density meets conflicts: the test saw some
