@@ -4,8 +4,9 @@
 
 For every finished trial of the sweep (``trial.json`` and ``checkpoint.pt`` present) it copies
 the checkpoint, the training log and the training arguments: the ``--primary`` seed into the
-agent folder itself (``checkpoint.pt``, ``training_log.jsonl``, ``train_args.json``: the files
-the agent loads by default, replacing the earlier run), every other seed into
+agent folder itself (``checkpoint.pt``, ``training_log.jsonl``, ``train_args.json`` and its
+``curve.png``: the files the agent loads by default, replacing the earlier run), every other
+seed into
 ``seeds/<k>/``. ``run_dir`` in the arguments is made relative to the repository. Then it prints
 the ``checkpoint`` and ``seeds`` fields for the entry's submission file. Unfinished trials are
 skipped (say so); copying is by temporary file and rename, so an interrupted run leaves no
@@ -56,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
         args["run_dir"] = os.path.relpath(d.resolve(), ROOT)
         _copy(d / "checkpoint.pt", dest / "checkpoint.pt")
         _copy(d / "log.jsonl", dest / "training_log.jsonl")
+        if seed == a.primary and (d / "curve.png").is_file():
+            _copy(d / "curve.png", dest / "curve.png")
         tmp = dest / "train_args.json.tmp"
         tmp.write_text(json.dumps(args, indent=2) + "\n", encoding="utf-8")
         os.replace(tmp, dest / "train_args.json")
