@@ -95,7 +95,10 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert beside and "| PPO | high | 93.3 |" in beside.group(0)
     paper = re.search(r"^## Published numbers.*?(?=^## Plots)", readme, re.M | re.S)
     assert paper and "| PPO | low | 100 |" in paper.group(0)
+    claims = re.search(r"^## Claims of the paper.*?(?=^## )", readme, re.M | re.S)
+    assert claims and "| published | measured here | verdict |" in claims.group(0)
     ours = readme.replace(beside.group(0), "").replace(paper.group(0), "")
+    ours = ours.replace(claims.group(0), "")
     assert "| PPO |" not in ours and "93.3" not in ours
     assert "Weave — published as “PPO” (Table 2)" in readme
     plots = {p.name for p in (lb / "plots").glob("*.png")}
