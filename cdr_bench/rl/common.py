@@ -168,6 +168,8 @@ class RunLog:
         if not args.resume:
             with open(self.path, "w"):
                 pass
+        elif os.path.exists(self.path):
+            self._drop_lines_after(st["step"])
         with open(os.path.join(args.run_dir, "args.json"), "w") as f:
             json.dump({**dataclasses.asdict(args), "algorithm": algorithm}, f, indent=2)
         self.pbar = None
@@ -177,6 +179,28 @@ class RunLog:
             self.pbar = tqdm(
                 total=args.total_steps, initial=st["step"], unit="step", dynamic_ncols=True
             )
+
+    def _drop_lines_after(self, step: int) -> None:
+        """A run that died after its last saved state wrote log lines the resumed run will
+        write again: keep only the lines up to the state's ``step``."""
+        with open(self.path, encoding="utf-8") as f:
+            lines = f.readlines()
+        keep = []
+        for line in lines:
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:  # a line cut by the death
+                continue
+            if isinstance(row, dict) and isinstance(row.get("step"), int) and row["step"] > step:
+                continue
+            if isinstance(row, dict) and "final" in row:
+                continue
+            keep.append(line if line.endswith("\n") else line + "\n")
+        if keep != lines:
+            tmp = self.path + ".tmp"
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.writelines(keep)
+            os.replace(tmp, self.path)
 
     def state_dict(self, step: int) -> dict[str, Any]:
         return {

@@ -16,8 +16,14 @@ Fault tolerance without a scheduler of our own:
   the folder exists, so two attempts of one trial can never both land);
 - a trial folder exists only complete, with ``trial.json`` (settings, timings) and the result
   files ``result.json`` / ``result.jsonl`` written by ``cdr-bench evaluate``;
-- ``--resume`` skips every trial whose folder exists; work folders of dead attempts are
-  garbage and removed at the end of the sweep.
+- ``--resume`` skips every trial whose folder exists;
+- an attempt that died (a killed sweep, a lost node, the end of a session) leaves its work
+  folder with the trainer's last saved state (``state.pt``, every ``checkpoint_every``
+  transitions); the next attempt of the trial takes the folder over and continues the training
+  exactly (``cdr-bench train --resume``), losing at most the transitions since that state. An
+  attempt holds an exclusive ``flock`` on ``<work>/.lock`` while it runs (released by the
+  kernel when its process dies), so a live attempt's folder is never taken; the work folders
+  left at the end of a sweep (trials that failed for good) are removed.
 
 On a cluster of several machines ``--out``, the agent file and the Python environment must be
 at the same paths on every node (a shared file system), as for any Ray job without a
@@ -60,19 +66,54 @@ def _tail(path: Path, n: int = 12) -> str:
 def run_trial(trial: Trial, out: str) -> dict[str, Any]:
     """Train, evaluate and publish one trial (the body of the Ray task; also callable
     directly). Returns the ``trial.json`` record. Raises ``RuntimeError`` when a step fails."""
-    from cdr_bench.evaluate.results import atomic_write_text
 
     root = Path(out)
     final = root / trial.key
     if (final / TRIAL_FILE).is_file():  # an earlier attempt landed already
         return json.loads((final / TRIAL_FILE).read_text())
-    work = root / ".work" / f"{trial.key}-{uuid.uuid4().hex[:8]}"
+    work, lock, resumed = _claim_attempt(root, trial.key)
+    try:
+        return _run_attempt(trial, root, final, work, resumed)
+    finally:
+        os.close(lock)
+
+
+def _claim_attempt(root: Path, key: str) -> tuple[Path, int, str]:
+    """The work folder of this attempt, its lock's descriptor, and what it resumes: ``""`` (a
+    new folder), ``"train"`` (a dead attempt's saved training state) or ``"evaluate"`` (a dead
+    attempt that finished training)."""
+    import fcntl
+
+    for old in sorted(
+        (root / ".work").glob(f"{key}-*"), key=lambda p: p.stat().st_mtime, reverse=True
+    ):
+        trained = (old / "train.done").is_file()
+        if not (trained or (old / "state.pt").is_file()):
+            continue
+        fd = os.open(old / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # a live attempt holds it
+            os.close(fd)
+            continue
+        return old, fd, "evaluate" if trained else "train"
+    work = root / ".work" / f"{key}-{uuid.uuid4().hex[:8]}"
     work.mkdir(parents=True)
+    fd = os.open(work / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    return work, fd, ""
+
+
+def _run_attempt(trial: Trial, root: Path, final: Path, work: Path, resumed: str) -> dict[str, Any]:
+    from cdr_bench.evaluate.results import atomic_write_text
+
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     env.pop(_checkpoint_env(), None)
     t0 = time.time()
     steps: dict[str, float] = {}
     train_cmd = [sys.executable, "-m", "cdr_bench", "train", *trial.train_argv(str(work))]
+    if resumed == "train":
+        train_cmd.append("--resume")
     shutil.copyfile(trial.agent_file, work / "agent.py")
     ev = trial.evaluation
     eval_cmd = [sys.executable, "-m", "cdr_bench", "evaluate", str(work / "agent.py")]
@@ -82,15 +123,19 @@ def run_trial(trial: Trial, out: str) -> dict[str, Any]:
     if "batch_size" in ev:
         eval_cmd += ["--batch-size", str(ev["batch_size"])]
     eval_cmd += ["--out", str(work / RESULT_FILE), "--no-progress"]
-    for name, cmd in (("train", train_cmd), ("evaluate", eval_cmd)):
+    stages = [("evaluate", eval_cmd)]
+    if resumed != "evaluate":
+        stages.insert(0, ("train", train_cmd))
+    for name, cmd in stages:
         log = work / f"{name}.log"
         ts = time.time()
-        with open(log, "w") as f:
+        with open(log, "a" if resumed else "w") as f:
             rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env).returncode
         steps[f"{name}_s"] = round(time.time() - ts, 2)
         if rc != 0:
             raise RuntimeError(f"trial {trial.key}: {name} exited with {rc}:\n{_tail(log)}")
         if name == "train":  # the full training state (replay buffer): not needed afterwards
+            (work / "train.done").write_text("")
             (work / "state.pt").unlink(missing_ok=True)
     # the result names the folder it will live in, not the work folder
     res_path = work / RESULT_FILE
@@ -110,6 +155,7 @@ def run_trial(trial: Trial, out: str) -> dict[str, Any]:
         "host": os.uname().nodename,
         "ray_node": _ray_node_id(),
         "attempt": work.name,
+        "resumed": resumed or None,
         "pid": os.getpid(),
         "wall_s": round(time.time() - t0, 2),
         **steps,

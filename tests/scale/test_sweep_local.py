@@ -98,3 +98,42 @@ def test_evaluate_ray_backend_equals_local(local_ray, tmp_path):
     assert (tmp_path / "local.jsonl").read_bytes() == (tmp_path / "ray.jsonl").read_bytes()
     with pytest.raises(UserError, match="--address needs --backend ray"):
         evaluate(agent, jobs, tmp_path / "x.json", address="127.0.0.1:1", progress=False)
+
+
+@pytest.mark.slow
+def test_a_dead_attempt_is_resumed_not_restarted(tmp_path):
+    """A sweep killed mid-training (e.g. at the end of a session) leaves its work folder with
+    the trainer's saved state; the next attempt takes it over with ``cdr-bench train --resume``
+    (log lines written after that state dropped), and never takes a live attempt's folder."""
+    import fcntl
+    import subprocess
+    import sys
+
+    from cdr_bench.scale.sweep import run_trial
+
+    (trial,) = load_sweep(tiny_sweep(tmp_path, [1])).trials
+    out = tmp_path / "out"
+    dead = out / ".work" / f"{trial.key}-dead0001"
+    argv = trial.train_argv(str(dead))
+    argv[argv.index("--total-steps") + 1] = "60"  # the attempt "died" at its state of step 60
+    r = subprocess.run([sys.executable, "-m", "cdr_bench", "train", *argv], capture_output=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (dead / "state.pt").is_file()
+    with open(dead / "log.jsonl", "a") as f:
+        f.write('{"step": 999999, "lost": true}\n{"step": 1000')  # written after the state
+
+    live = out / ".work" / f"{trial.key}-live0002"  # a running attempt: locked, never taken
+    live.mkdir()
+    (live / "state.pt").write_bytes(b"x")
+    fd = os.open(live / ".lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        rec = run_trial(trial, str(out))
+    finally:
+        os.close(fd)
+    assert rec["resumed"] == "train" and rec["attempt"] == dead.name
+    rows = [json.loads(x) for x in (out / trial.key / "log.jsonl").read_text().splitlines()]
+    steps = [r["step"] for r in rows if "step" in r]
+    assert steps == sorted(steps) and 999999 not in steps and len(set(steps)) == len(steps)
+    assert rows[-1]["final"]["step"] >= 120 and steps[0] <= 60 < steps[-1]
+    assert (live / "state.pt").read_bytes() == b"x"  # untouched
