@@ -182,7 +182,8 @@ class RunLog:
 
     def _drop_lines_after(self, step: int) -> None:
         """A run that died after its last saved state wrote log lines the resumed run will
-        write again: keep only the lines up to the state's ``step``."""
+        write again: keep only the lines up to the state's ``step`` (a ``final`` line of a run
+        that finished and is extended stays: it records where that run ended)."""
         with open(self.path, encoding="utf-8") as f:
             lines = f.readlines()
         keep = []
@@ -192,8 +193,6 @@ class RunLog:
             except json.JSONDecodeError:  # a line cut by the death
                 continue
             if isinstance(row, dict) and isinstance(row.get("step"), int) and row["step"] > step:
-                continue
-            if isinstance(row, dict) and "final" in row:
                 continue
             keep.append(line if line.endswith("\n") else line + "\n")
         if keep != lines:
