@@ -6,9 +6,10 @@ For every finished trial of the sweep (``trial.json`` and ``checkpoint.pt`` pres
 the checkpoint, the training log and the training arguments: the ``--primary`` seed into the
 agent folder itself (``checkpoint.pt``, ``training_log.jsonl``, ``train_args.json`` and its
 ``curve.png``: the files the agent loads by default, replacing the earlier run), every other
-seed into
-``seeds/<k>/``. ``run_dir`` in the arguments is made relative to the repository. Then it prints
-the ``checkpoint`` and ``seeds`` fields for the entry's submission file. Unfinished trials are
+seed into ``seeds/<k>/`` (``--primary 0``: every seed there, to commit the seeds that finished
+before all have; the submission is not touched). ``run_dir`` in the arguments is made relative
+to the repository. Then it prints the ``checkpoint`` and ``seeds`` fields for the entry's
+submission file. Unfinished trials are
 skipped (say so); copying is by temporary file and rename, so an interrupted run leaves no
 half-written checkpoint.
 """
@@ -36,7 +37,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("sweep_dir", type=Path, help="output folder of `cdr-bench sweep`")
     ap.add_argument("agent_dir", type=Path, help="the agent's folder, e.g. agents/ppo")
-    ap.add_argument("--primary", type=int, default=1, help="seed shipped as the default (1)")
+    ap.add_argument(
+        "--primary", type=int, default=1, help="seed shipped as the default (1; 0: none)"
+    )
     a = ap.parse_args(argv)
     if not a.sweep_dir.is_dir() or not (a.agent_dir / "agent.py").is_file():
         print(
@@ -64,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
         os.replace(tmp, dest / "train_args.json")
         shipped[seed] = dest
         print(f"seed {seed}: {d} -> {dest}")
+    staged = a.agent_dir / "seeds" / str(a.primary)
+    if a.primary in shipped and staged.is_dir():  # shipped earlier with --primary 0
+        shutil.rmtree(staged)
+        print(f"removed {staged} (the primary seed now lives in {a.agent_dir})")
     if a.primary not in shipped:
         print(f"note: the primary seed {a.primary} is not finished yet")
     rel = {k: v.resolve().relative_to(ROOT).as_posix() for k, v in sorted(shipped.items())}
