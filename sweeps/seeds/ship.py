@@ -6,12 +6,20 @@ For every finished trial of the sweep (``trial.json`` and ``checkpoint.pt`` pres
 the checkpoint, the training log and the training arguments: the ``--primary`` seed into the
 agent folder itself (``checkpoint.pt``, ``training_log.jsonl``, ``train_args.json`` and its
 ``curve.png``: the files the agent loads by default, replacing the earlier run), every other
-seed into ``seeds/<k>/`` (``--primary 0``: every seed there, to commit the seeds that finished
-before all have; the submission is not touched). ``run_dir`` in the arguments is made relative
+seed into ``seeds/<k>/``. ``run_dir`` in the arguments is made relative
 to the repository. Then it prints the ``checkpoint`` and ``seeds`` fields for the entry's
 submission file. Unfinished trials are
 skipped (say so); copying is by temporary file and rename, so an interrupted run leaves no
 half-written checkpoint.
+
+    python sweeps/seeds/ship.py runs/sweeps/seeds-td3 --stage
+
+commits nothing to an agent (its weights are part of its leaderboard identity, so they change
+only with a re-scoring): it copies the finished trials, each as the sweep wrote it (trial.json,
+result.json/.jsonl, checkpoint.pt, log.jsonl, args.json), to ``sweeps/landed/<sweep>/<key>/`` so
+that a finished seed is committed as it lands. That folder is a sweep output folder: copied back
+to ``runs/sweeps/<sweep>/``, ``cdr-bench sweep ... --resume`` skips those trials. Shipping the
+sweep later removes the staged copy (one copy of each checkpoint).
 """
 
 from __future__ import annotations
@@ -33,15 +41,35 @@ def _copy(src: Path, dst: Path) -> None:
     os.replace(tmp, dst)
 
 
+STAGED = ("trial.json", "result.json", "result.jsonl", "checkpoint.pt", "log.jsonl", "args.json")
+
+
+def stage(sweep_dir: Path) -> int:
+    dest = ROOT / "sweeps" / "landed" / sweep_dir.resolve().name
+    n = 0
+    for trial in sorted(sweep_dir.glob("*/trial.json")):
+        d = trial.parent
+        if not all((d / f).is_file() for f in STAGED):
+            print(f"skip {d.name}: not finished")
+            continue
+        for f in STAGED:
+            _copy(d / f, dest / d.name / f)
+        n += 1
+        print(f"{d.name} (seed {json.loads(trial.read_text())['seed']}) -> {dest / d.name}")
+    print(f"{n} finished trial(s) in {dest}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("sweep_dir", type=Path, help="output folder of `cdr-bench sweep`")
-    ap.add_argument("agent_dir", type=Path, help="the agent's folder, e.g. agents/ppo")
-    ap.add_argument(
-        "--primary", type=int, default=1, help="seed shipped as the default (1; 0: none)"
-    )
+    ap.add_argument("agent_dir", type=Path, nargs="?", help="the agent's folder, e.g. agents/ppo")
+    ap.add_argument("--stage", action="store_true", help="copy to sweeps/landed/ only")
+    ap.add_argument("--primary", type=int, default=1, help="seed shipped as the default (1)")
     a = ap.parse_args(argv)
-    if not a.sweep_dir.is_dir() or not (a.agent_dir / "agent.py").is_file():
+    if a.stage and a.sweep_dir.is_dir():
+        return stage(a.sweep_dir)
+    if a.agent_dir is None or not a.sweep_dir.is_dir() or not (a.agent_dir / "agent.py").is_file():
         print(
             f"error: {a.sweep_dir} is not a folder or {a.agent_dir} has no agent.py",
             file=sys.stderr,
@@ -67,10 +95,10 @@ def main(argv: list[str] | None = None) -> int:
         os.replace(tmp, dest / "train_args.json")
         shipped[seed] = dest
         print(f"seed {seed}: {d} -> {dest}")
-    staged = a.agent_dir / "seeds" / str(a.primary)
-    if a.primary in shipped and staged.is_dir():  # shipped earlier with --primary 0
-        shutil.rmtree(staged)
-        print(f"removed {staged} (the primary seed now lives in {a.agent_dir})")
+    landed = ROOT / "sweeps" / "landed" / a.sweep_dir.resolve().name
+    if shipped and landed.is_dir() and landed.resolve() != a.sweep_dir.resolve():
+        shutil.rmtree(landed)  # one copy: the shipped seeds replace the staged ones
+        print(f"removed the staged copy {landed}")
     if a.primary not in shipped:
         print(f"note: the primary seed {a.primary} is not finished yet")
     rel = {k: v.resolve().relative_to(ROOT).as_posix() for k, v in sorted(shipped.items())}
