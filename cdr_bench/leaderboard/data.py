@@ -57,7 +57,7 @@ from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
-DATA_VERSION = 3
+DATA_VERSION = 4
 HEADLINE_SCENARIO = "high"
 HEADLINE_METRIC = "clean_success_rate"
 TIE_BREAK = "extra_path_km"
@@ -519,13 +519,17 @@ def _read_log(path: Path) -> list[dict[str, Any]]:
         raise UserError(f"{path}: cannot read the training log ({e})") from None
 
 
-def training_info(sub: Submission, root: Path) -> tuple[dict[str, Any] | None, list[Any]]:
-    """``(budget, curves)`` of an entry: the transitions and seeds of its training (from the
-    ``final`` lines of its logs, else as declared; ``None`` for a scripted entry) and, per log,
-    its rolling training success against transitions."""
+def training_info(
+    sub: Submission, root: Path
+) -> tuple[dict[str, Any] | None, list[Any], list[Any]]:
+    """``(budget, curves, fixed)`` of an entry: the transitions and seeds of its training (from
+    the ``final`` lines of its logs, else as declared; ``None`` for a scripted entry); per log,
+    its rolling training success against transitions; and per log that has them, the clean
+    success of its greedy policy on the fixed evaluation set (the trainers' ``curve/`` lines)
+    against transitions."""
     if sub.group == "scripted":
-        return None, []
-    finals, curves = [], []
+        return None, [], []
+    finals, curves, fixed = [], [], []
     for rel in sub.training_logs:
         rows = _read_log(root / rel)
         fin = [r["final"] for r in rows if "final" in r]
@@ -539,6 +543,13 @@ def training_info(sub: Submission, root: Path) -> tuple[dict[str, Any] | None, l
                 if "step" in r and r.get("charts/success_rolling") is not None
             ]
         )
+        points = [
+            [r["step"], round(float(r["curve/clean_success"]), 4)]
+            for r in rows
+            if isinstance(r.get("step"), int) and r.get("curve/clean_success") is not None
+        ]
+        if points:
+            fixed.append(points)
     if finals:
         transitions: int | list[int] | None = (
             finals[0] if len(set(finals)) == 1 else [min(finals), max(finals)]
@@ -555,7 +566,7 @@ def training_info(sub: Submission, root: Path) -> tuple[dict[str, Any] | None, l
         budget = {"transitions": sub.budget[0], "seeds": sub.budget[1], "source": "declared"}
     else:
         budget = {"transitions": None, "seeds": None, "source": None}
-    return budget, curves
+    return budget, curves, fixed
 
 
 SEED_METRIC = "clean_success_rate"
@@ -841,7 +852,12 @@ def build_data(
         "tactical": tactical,
         "published_vs_measured": side_by_side,
         "learning_curves": [
-            {"entry": e.name, "logs": list(e.sub.training_logs), "series": info[e.name][1]}
+            {
+                "entry": e.name,
+                "logs": list(e.sub.training_logs),
+                "series": info[e.name][1],
+                "fixed": info[e.name][2],
+            }
             for e in entries
             if info[e.name][1]
         ],

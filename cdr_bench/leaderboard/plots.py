@@ -263,14 +263,16 @@ def _pareto(data: dict[str, Any], table: dict[str, Any]) -> bytes:
     return _png(fig)
 
 
-def _curves(data: dict[str, Any], names: list[str], title: str) -> bytes:
-    """Rolling training success against transitions: one line per entry (the mean over its
-    logs, with the min-max band when it has several seeds)."""
+def _curves(data: dict[str, Any], names: list[str], title: str, key: str = "series") -> bytes:
+    """A learning curve against transitions, one line per entry (the mean over its logs, with
+    the min-max band when it has several seeds): ``series``, the rolling success of training
+    episodes, or ``fixed``, the clean success of the greedy policy on the fixed evaluation
+    set."""
     styles = entry_styles(data)
     by = {c["entry"]: c for c in data["learning_curves"]}
     fig, ax = _figure(9, 4.5)
     for name in names:
-        series = [np.asarray(s, float) for s in by[name]["series"] if s]
+        series = [np.asarray(s, float) for s in by[name][key] if s]
         if not series:
             continue
         st = styles[name]
@@ -294,12 +296,16 @@ def _curves(data: dict[str, Any], names: list[str], title: str) -> bytes:
                 x, 100 * ys.min(axis=0), 100 * ys.max(axis=0), color=st["color"], alpha=0.2
             )
     ax.set_xlabel("transitions (millions)")
-    ax.set_ylabel("rolling training success (%)")
-    ax.set_title(
-        f"{title}\n(the last training episodes on the scenario being trained; with a curriculum "
-        "its current stage, so it drops at each promotion; not an evaluation)",
-        fontsize=9,
-    )
+    if key == "fixed":
+        ax.set_ylabel("clean success on the fixed evaluation set (%)")
+        note = "the greedy policy on the same episodes of high at every point"
+    else:
+        ax.set_ylabel("rolling training success (%)")
+        note = (
+            "the last training episodes on the scenario being trained; with a curriculum "
+            "its current stage, so it drops at each promotion; not an evaluation"
+        )
+    ax.set_title(f"{title}\n({note})", fontsize=9)
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)
     _legend(fig)
@@ -382,6 +388,16 @@ def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
         if ablations:
             out["learning_curves_ablations.png"] = _curves(
                 data, ablations, "Learning curves of the ablations"
+            )
+        fixed = [
+            n
+            for n in _ranked(data)
+            if n in with_logs
+            and any(c["entry"] == n and c["fixed"] for c in data["learning_curves"])
+        ]
+        if fixed:
+            out["learning_curves_fixed.png"] = _curves(
+                data, fixed, "Learning curves on the fixed evaluation set", key="fixed"
             )
         tact = _tactical(data)
         if tact is not None:

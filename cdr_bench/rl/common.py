@@ -9,20 +9,26 @@ Pure numpy (no torch, no SB3): the trainer modules import this at module level, 
 * :class:`RunLog` -- the run directory's ``args.json`` and ``log.jsonl``, the progress bar, the
   wall-time limit and the learning curve. Log keys have fixed prefixes: ``charts/`` (rollout
   statistics and scheduled hyper-parameters), ``losses/`` (what the learner's update returns),
-  ``curriculum/`` (stage, promotions), ``eval/`` (the final quick evaluation, in the ``final``
-  line);
-* :func:`quick_evaluation` -- the final quick evaluation on the three densities.
+  ``curriculum/`` (stage, promotions), ``curve/`` (the greedy policy on the fixed evaluation
+  set, every ``curve_every`` transitions: the learning curve), ``eval/`` (the final quick
+  evaluation, in the ``final`` line);
+* :func:`quick_evaluation` -- the final quick evaluation on the three densities;
+* :func:`untouched_rng` -- runs an evaluation without moving any random stream of training.
 """
 
 from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import dataclasses
 import inspect
 import json
 import os
+import random
+import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +39,11 @@ from cdr_bench.rl.quick_eval import ActBatch, quick_eval
 
 OUTCOME_CHARTS = ((1, "success"), (2, "nmac"), (3, "los_end"), (5, "timeout"))
 """Outcome codes of :mod:`cdr_bench.sim.core` reported in the log as ``charts/<name>``."""
+
+CURVE_SCENARIO, CURVE_SEED = "high", 20_000
+"""The fixed evaluation set of the learning curve: ``curve_episodes`` episodes of ``high`` with
+episode seeds 20000.. (the same episodes at every point of every run; other controlled
+aircraft hold)."""
 
 
 @dataclass
@@ -76,6 +87,11 @@ class TrainArgs:
     """transitions between checkpoints"""
     eval_episodes: int = 100
     """episodes per density for the final quick evaluation (0 = skip)"""
+    curve_every: int = 50_000
+    """transitions between evaluations of the greedy policy on the fixed evaluation set (the
+    learning curve; 0 = off; training is the same with or without them)"""
+    curve_episodes: int = 100
+    """episodes of the fixed evaluation set (high, episode seeds 20000..)"""
 
 
 def training_env(args: TrainArgs) -> CurriculumEnv:
@@ -163,6 +179,9 @@ class RunLog:
         st = state or {"step": 0, "wall_s": 0.0, "last_log": 0, "last_ckpt": 0}
         self.wall_before = st["wall_s"]
         self.last_log, self.last_ckpt = st["last_log"], st["last_ckpt"]
+        # The first point at the first transition (the initial policy); a state written before
+        # the curve existed likewise gets its first point at the next transition.
+        self.last_curve = st.get("last_curve", st["step"] - args.curve_every)
         os.makedirs(args.run_dir, exist_ok=True)
         self.path = os.path.join(args.run_dir, "log.jsonl")
         if not args.resume:
@@ -207,6 +226,7 @@ class RunLog:
             "wall_s": self.wall(),
             "last_log": self.last_log,
             "last_ckpt": self.last_ckpt,
+            "last_curve": self.last_curve,
         }
 
     def log_due(self, step: int) -> bool:
@@ -220,6 +240,25 @@ class RunLog:
         due = step - self.last_ckpt >= self.args.checkpoint_every
         self.last_ckpt = step if due else self.last_ckpt
         return due
+
+    def curve_due(self, step: int) -> bool:
+        """``curve_every`` transitions since the last point of the learning curve (then it is
+        due no more); never when ``curve_every`` is 0."""
+        due = bool(self.args.curve_every) and step - self.last_curve >= self.args.curve_every
+        self.last_curve = step if due else self.last_curve
+        return due
+
+    def curve_point(self, step: int, act_batch: ActBatch, *owners: object) -> None:
+        """One point of the learning curve: ``act_batch`` (the greedy policy) on the fixed
+        evaluation set, logged as ``curve/<key>``. The random streams of training (torch's,
+        numpy's and Python's global ones and every generator held by ``owners``) are restored
+        afterwards, so a run with curve points trains exactly as one without."""
+        with untouched_rng(*owners):
+            r = quick_eval(act_batch, CURVE_SCENARIO, self.args.curve_episodes, seed=CURVE_SEED)
+        rec: dict[str, Any] = {"step": step, "wall_s": round(self.wall(), 1)}
+        rec["curve/scenario"] = r.pop("scenario")
+        rec.update({f"curve/{k}": v for k, v in r.items()})
+        self.write(rec)
 
     def wall(self) -> float:
         return self.wall_before + time.time() - self.t0
@@ -283,6 +322,31 @@ def quick_evaluation(act_batch: ActBatch, episodes: int) -> dict[str, Any]:
         f"eval/{sc}": quick_eval(act_batch, sc, episodes, seed=10_000)
         for sc in ("low", "medium", "high")
     }
+
+
+@contextlib.contextmanager
+def untouched_rng(*owners: object) -> Iterator[None]:
+    """Restore, on exit, the global random states of Python, numpy and (if imported) torch, and
+    the state of every ``torch.Generator`` and ``numpy.random.Generator`` that is an attribute
+    of one of ``owners``."""
+    torch = sys.modules.get("torch")
+    saved_py, saved_np = random.getstate(), np.random.get_state()  # noqa: NPY002 - SB3 uses it
+    saved_torch = torch.random.get_rng_state() if torch is not None else None
+    gens = [g for o in owners for g in vars(o).values()]
+    t_gen = torch.Generator if torch is not None else ()
+    saved_t = [(g, g.get_state()) for g in gens if isinstance(g, t_gen)]
+    saved_n = [(g, g.bit_generator.state) for g in gens if isinstance(g, np.random.Generator)]
+    try:
+        yield
+    finally:
+        random.setstate(saved_py)
+        np.random.set_state(saved_np)  # noqa: NPY002
+        if torch is not None:
+            torch.random.set_rng_state(saved_torch)
+        for g, st in saved_t:
+            g.set_state(st)
+        for g, st in saved_n:
+            g.bit_generator.state = st
 
 
 def plot_curve(log_path: str, out_png: str, title: str) -> None:

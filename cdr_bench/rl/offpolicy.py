@@ -263,6 +263,8 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
             charts.update({f"losses/{k}": float(np.mean(v)) for k, v in loop.losses.items()})
             log.interval(loop.step, env, env.take_outcomes(), updates=loop.updates, **charts)
             loop.losses = {}
+        if log.curve_due(loop.step):
+            log.curve_point(loop.step, lambda o, m: learner.act(o, m, explore=False), learner)
         if log.checkpoint_due(loop.step):
             save()
     save()

@@ -42,6 +42,7 @@ def quick_eval(
         "scenario": scenario,
         "episodes": len(oc),
         "success": float(np.mean(oc == SUCCESS)),
+        "clean_success": float(np.mean((oc == SUCCESS) & ~hl)),
         "los": float(np.mean(hl | (oc == LOS))),
         "nmac": float(np.mean(oc == NMAC)),
         "timeout": float(np.mean(oc == TIMEOUT)),

@@ -45,6 +45,19 @@ def td3_actor(obs_dim: int, width: int = 128, layers: int = 3, act_dim: int = 3)
 
 def export_actor(model: Any, kind: str, path: str, meta: dict) -> None:
     """Write the actor of a trained SB3 ``model`` (kind "ppo" or "td3") to ``path``."""
+    config, sd = actor_state(model, kind)
+    torch.save({"config": config, "state_dict": sd, "meta": meta}, path)
+
+
+def actor_of(model: Any, kind: str) -> nn.Sequential:
+    """The actor of an SB3 ``model`` as the network :func:`load_actor` gives (a copy, in eval
+    mode): what the exported checkpoint would hold now."""
+    config, sd = actor_state(model, kind)
+    return _build(config, sd)
+
+
+def actor_state(model: Any, kind: str) -> tuple[dict, dict[str, torch.Tensor]]:
+    """``(config, state_dict)`` of the actor of an SB3 ``model`` (kind "ppo" or "td3")."""
     obs_dim = int(model.observation_space.shape[0])
     if kind == "ppo":
         pol = model.policy
@@ -62,15 +75,18 @@ def export_actor(model: Any, kind: str, path: str, meta: dict) -> None:
         layers, width = len(mu_linears) - 1, int(mu_linears[0].out_features)
     else:
         raise ValueError(f"kind must be 'ppo' or 'td3', got {kind!r}")
-    config = {"kind": kind, "obs_dim": obs_dim, "width": width, "layers": layers}
-    torch.save({"config": config, "state_dict": sd, "meta": meta}, path)
+    return {"kind": kind, "obs_dim": obs_dim, "width": width, "layers": layers}, sd
 
 
 def load_actor(path: str) -> tuple[nn.Sequential, dict]:
     """(network in eval mode, config) from an exported actor, read with ``weights_only=True``."""
     ck = torch.load(path, map_location="cpu", weights_only=True)
-    cfg = ck["config"]
+    return _build(ck["config"], ck["state_dict"]), ck["config"]
+
+
+def _build(cfg: dict, sd: dict[str, torch.Tensor]) -> nn.Sequential:
     build = ppo_actor if cfg["kind"] == "ppo" else td3_actor
-    net = build(cfg["obs_dim"], cfg["width"], cfg["layers"])
-    net.load_state_dict(ck["state_dict"])
-    return net.eval(), cfg
+    with torch.random.fork_rng(devices=[]):  # the initial weights are overwritten: draw nothing
+        net = build(cfg["obs_dim"], cfg["width"], cfg["layers"])
+    net.load_state_dict(sd)
+    return net.eval()

@@ -40,6 +40,7 @@ from cdr_bench.rl.common import (
     training_env,
 )
 from cdr_bench.rl.offpolicy import OffPolicyArgs
+from cdr_bench.rl.quick_eval import ActBatch
 
 ALGORITHMS = ("ppo", "maskable-ppo", "td3")
 TITLES = {"ppo": "PPO", "maskable-ppo": "MaskablePPO", "td3": "TD3"}
@@ -113,7 +114,7 @@ def train(algorithm: str, args: Args) -> dict:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from cdr_bench.rl.baselines import continuous_to_index
-    from cdr_bench.rl.sb3_policies import export_actor
+    from cdr_bench.rl.sb3_policies import actor_of, export_actor
     from cdr_bench.wrappers import vector_env_to_sb3
 
     cls = _algorithm_class(algorithm)
@@ -147,6 +148,21 @@ def train(algorithm: str, args: Args) -> dict:
     kind = "td3" if td3 else "ppo"
 
     losses: dict[str, float] = saved.get("losses", {})  # of the last update, as SB3 logs them
+
+    def greedy() -> ActBatch:
+        """The deterministic policy of the actor as it is now (what the checkpoint would act)."""
+        net = actor_of(model, kind)
+
+        def act_batch(o: np.ndarray, m: np.ndarray) -> np.ndarray:
+            with torch.no_grad():
+                out = net(torch.from_numpy(o))
+            if td3:
+                return continuous_to_index(out.numpy())
+            if algorithm == "maskable-ppo":
+                out = out.masked_fill(torch.from_numpy(m) == 0, -torch.inf)
+            return out.argmax(1).numpy()
+
+        return act_batch
 
     def read_losses() -> None:
         for k, v in model.logger.name_to_value.items():
@@ -185,6 +201,8 @@ def train(algorithm: str, args: Args) -> dict:
             if log.log_due(step):
                 read_losses()
                 log.interval(step, env, env.take_outcomes(), **losses)
+            if log.curve_due(step):
+                log.curve_point(step, greedy(), model.action_space)
             if log.checkpoint_due(step):
                 save()
             return not log.out_of_time()
@@ -201,21 +219,7 @@ def train(algorithm: str, args: Args) -> dict:
         "wall_s": round(log.wall(), 1),
         "stage": env.stage or 0,
     }
-    if args.eval_episodes:
-        from cdr_bench.rl.sb3_policies import load_actor
-
-        net, _ = load_actor(os.path.join(args.run_dir, "checkpoint.pt"))
-
-        def act_batch(o: np.ndarray, m: np.ndarray) -> np.ndarray:
-            with torch.no_grad():
-                out = net(torch.from_numpy(o))
-            if td3:
-                return continuous_to_index(out.numpy())
-            if algorithm == "maskable-ppo":
-                out = out.masked_fill(torch.from_numpy(m) == 0, -torch.inf)
-            return out.argmax(1).numpy()
-
-        summary.update(quick_evaluation(act_batch, args.eval_episodes))
+    summary.update(quick_evaluation(greedy(), args.eval_episodes))
     return log.finish(summary, TITLES[algorithm])
 
 

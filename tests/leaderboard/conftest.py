@@ -94,6 +94,10 @@ def make_repo(root: Path) -> Path:
             {"step": 1000 * k, "charts/success_rolling": min(1.0, 0.1 * k + 0.05 * seed)}
             for k in range(1, 11)
         ]
+        log += [  # the fixed-evaluation curve of the trainers
+            {"step": 5000 * k, "curve/scenario": "high", "curve/clean_success": 0.2 * k + seed / 10}
+            for k in range(3)
+        ]
         log.append({"final": {"step": 10000, "wall_s": 1.0}})
         (root / "agents" / "weave" / f"log-{seed}.jsonl").write_text(
             "".join(json.dumps(r) + "\n" for r in log)

@@ -103,6 +103,13 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert "Weave — published as “PPO” (Table 2)" in readme
     plots = {p.name for p in (lb / "plots").glob("*.png")}
     assert {"success_rate.png", "pareto.png", "learning_curves.png", "latency.png"} <= plots
+    assert "learning_curves_fixed.png" in plots  # the weave logs have curve/ lines
+    data = json.loads((lb / "leaderboard.json").read_text())
+    (weave,) = [c for c in data["learning_curves"] if c["entry"] == "weave"]
+    assert weave["fixed"] == [
+        [[0, 0.1], [5000, 0.3], [10000, 0.5]],
+        [[0, 0.2], [5000, 0.4], [10000, 0.6]],
+    ]
     for p in plots:
         assert f"plots/{p}" in readme
     html = (lb / "index.html").read_text()

@@ -68,7 +68,9 @@ def test_tiny_training_run_and_agent(tmp_path, name):
     assert sum("final" in x for x in lines) == 2  # the resumed run appended to the log
     assert any("charts/success_rolling" in x for x in lines)
     prefixes = {k.split("/")[0] for x in lines for k in x if "/" in k}
-    assert prefixes <= {"charts", "losses", "curriculum"}
+    assert prefixes <= {"charts", "losses", "curriculum", "curve"}
+    # By default the learning curve starts with the initial policy (every 50,000 transitions).
+    assert [x["curve/episodes"] for x in lines if "curve/success" in x] == [100]
     assert any(k.startswith("losses/") for x in lines for k in x)
     assert json.loads((d / "args.json").read_text())["algorithm"] == name
     meta = torch.load(d / "checkpoint.pt", weights_only=True)["meta"]
@@ -122,7 +124,7 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch, name):
     the budget stays); SB3 runs stop at the end of a shorter budget (their schedules are
     constant)."""
     a, b = tmp_path / "a", tmp_path / "b"
-    total = ["--total-steps", "600"]
+    total = ["--total-steps", "600", *CURVE]
     train_in_process(name, a, *total)
     if name in OFF_POLICY_LOOP:
         calls = iter(range(10_000))
@@ -130,7 +132,7 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch, name):
         stopped = train_in_process(name, b, *total)
         monkeypatch.undo()
     else:
-        stopped = train_in_process(name, b, "--total-steps", "300")
+        stopped = train_in_process(name, b, "--total-steps", "300", *CURVE)
     assert 0 < stopped["step"] < 600
     train_in_process(name, b, *total, "--resume")
     ca = torch.load(a / "checkpoint.pt", weights_only=True)
@@ -139,6 +141,33 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch, name):
     for k, v in ca["state_dict"].items():
         assert torch.equal(v, cb["state_dict"][k]), k
     assert json.dumps(log_lines(a)) == json.dumps(log_lines(b))
+
+
+CURVE = ["--curve-every", "150", "--curve-episodes", "3"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(AGENT_DIR))
+def test_learning_curve_points_leave_training_unchanged(tmp_path, name):
+    """Evaluating the greedy policy on the fixed evaluation set every ``curve_every``
+    transitions adds ``curve/`` log lines and changes nothing else: same weights, same
+    training log as a run without them."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    train_in_process(name, a, "--total-steps", "600", "--curve-every", "0")
+    train_in_process(name, b, "--total-steps", "600", *CURVE)
+    ca = torch.load(a / "checkpoint.pt", weights_only=True)
+    cb = torch.load(b / "checkpoint.pt", weights_only=True)
+    for k, v in ca["state_dict"].items():
+        assert torch.equal(v, cb["state_dict"][k]), k
+    rows = log_lines(b)
+    curve = [r for r in rows if "curve/success" in r]
+    assert json.dumps(log_lines(a)) == json.dumps([r for r in rows if r not in curve])
+    steps = [r["step"] for r in curve]
+    assert len(steps) >= 3 and all(y - x >= 150 for x, y in zip(steps, steps[1:], strict=False))
+    for r in curve:
+        assert r["curve/scenario"] == "high" and r["curve/episodes"] == 3
+        assert 0 <= r["curve/clean_success"] <= r["curve/success"] <= 1
+    assert not any("curve/success" in r for r in log_lines(a))
 
 
 @pytest.mark.slow
