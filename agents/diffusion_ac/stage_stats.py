@@ -1,0 +1,114 @@
+"""What a Diffusion-AC training log says about its last curriculum stage (issue 16, item 5).
+
+    python agents/diffusion_ac/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
+        agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5]
+
+For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it prints:
+
+* when the stage was reached (transitions);
+* the rolling training success (``charts/success_rolling``): minimum, mean, and maximum;
+* the collapse windows, the stretches of lines whose rolling success is below ``--below``;
+* the critic's extremes with the step where each occurs: the TD loss (``losses/loss_q``), the
+  mean Q of the sampled actions (``losses/q_mean``), the largest Q (``losses/q_max``) and the
+  largest TD target (``losses/target_max``; the last two only in logs that carry them);
+* the largest share of training episodes cut by the step limit (``charts/timeout``);
+* the fixed-evaluation points (``curve/clean_success``, same 100 episodes of ``high``) logged
+  at that stage, when the log has them.
+
+Every number in agents/diffusion_ac/README.md about the stage-12 behaviour of a run comes from
+this script. The reward bounds every return by 1.0 (the goal term, docs/model.md §6), so a Q
+above 1 is an overestimate.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _lines(path: Path) -> list[dict]:
+    out = []
+    for raw in path.read_text(encoding="utf-8").splitlines():
+        raw = raw.strip()
+        if raw:
+            out.append(json.loads(raw))
+    return out
+
+
+def _extreme(rows: list[dict], key: str) -> str:
+    vals = [(r[key], r["step"]) for r in rows if isinstance(r.get(key), (int, float))]
+    if not vals:
+        return "-"
+    v, step = max(vals)
+    return f"{v:+.2f} at {step:,}"
+
+
+def summarise(path: Path, stage: int, below: float) -> str:
+    rows = _lines(path)
+    train = [r for r in rows if "step" in r and r.get("curriculum/stage") == stage]
+    if not train:
+        return f"{path}: no line at stage {stage}"
+    first = train[0]["step"]
+    succ = [r["charts/success_rolling"] for r in train]
+    windows: list[tuple[int, int, float]] = []
+    start = None
+    low = 1.0
+    for r in train:
+        s = r["charts/success_rolling"]
+        if s < below:
+            start = r["step"] if start is None else start
+            low = min(low, s)
+            end = r["step"]
+        elif start is not None:
+            windows.append((start, end, low))
+            start, low = None, 1.0
+    if start is not None:
+        windows.append((start, end, low))
+    reached = rows[-1].get("final", {}).get("step", train[-1]["step"])
+    out = [
+        f"{path}",
+        f"  stage {stage} from {first:,} to {reached:,} transitions ({len(train)} log lines)",
+        f"  rolling success min {min(succ):.2f}  mean {sum(succ) / len(succ):.2f}  "
+        f"max {max(succ):.2f}",
+        "  below {:.2f}: {}".format(
+            below,
+            "; ".join(f"{a:,}-{b:,} (min {m:.2f})" for a, b, m in windows) or "never",
+        ),
+        f"  max TD loss {_extreme(train, 'losses/loss_q')}; max mean Q "
+        f"{_extreme(train, 'losses/q_mean')}; max Q {_extreme(train, 'losses/q_max')}; "
+        f"max TD target {_extreme(train, 'losses/target_max')}",
+        f"  max timeout share {_extreme(train, 'charts/timeout')}",
+    ]
+    curve = [r for r in rows if "curve/clean_success" in r and r["step"] >= first]
+    if curve:
+        cs = [r["curve/clean_success"] for r in curve]
+        out.append(
+            f"  fixed evaluation ({curve[0]['curve/episodes']} episodes of "
+            f"{curve[0]['curve/scenario']}, {len(curve)} points): clean success min "
+            f"{min(cs):.2f} mean {sum(cs) / len(cs):.2f} max {max(cs):.2f} last {cs[-1]:.2f}"
+        )
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("logs", nargs="+", type=Path, help="training_log.jsonl / log.jsonl files")
+    ap.add_argument("--stage", type=int, default=12, help="curriculum stage (12)")
+    ap.add_argument("--below", type=float, default=0.5, help="collapse threshold (0.5)")
+    a = ap.parse_args(argv)
+    for p in a.logs:
+        if not p.is_file():
+            print(f"error: {p}: no such file", file=sys.stderr)
+            return 2
+        try:
+            print(summarise(p, a.stage, a.below))
+        except (json.JSONDecodeError, KeyError, TypeError) as e:
+            print(f"error: {p}: not a training log ({e})", file=sys.stderr)
+            return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+"""agents/diffusion_ac/stage_stats.py: the numbers the Diffusion-AC README cites about stage 12."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location(
+        "stage_stats", ROOT / "agents" / "diffusion_ac" / "stage_stats.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_windows_extremes_and_curve(tmp_path: Path) -> None:
+    rolling = [0.8, 0.9, 0.4, 0.0, 0.3, 0.7, 0.45, 0.85]
+    lines = [{"step": 10, "curriculum/stage": 11, "charts/success_rolling": 0.1}]
+    for i, s in enumerate(rolling):
+        lines.append(
+            {
+                "step": 100 * (i + 1),
+                "curriculum/stage": 12,
+                "charts/success_rolling": s,
+                "charts/timeout": 0.5 if i == 3 else 0.0,
+                "losses/loss_q": float(i),
+                "losses/q_mean": -1.0 + (5.0 if i == 4 else 0.0),
+            }
+        )
+    lines.append(
+        {"step": 300, "curve/scenario": "high", "curve/episodes": 100, "curve/clean_success": 0.6}
+    )
+    lines.append({"final": {"step": 900}})
+    log = tmp_path / "log.jsonl"
+    log.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    out = _module().summarise(log, 12, 0.5)
+    assert "stage 12 from 100 to 900 transitions (8 log lines)" in out
+    assert "min 0.00  mean 0.55  max 0.90" in out
+    assert "below 0.50: 300-500 (min 0.00); 700-700 (min 0.45)" in out
+    assert "max TD loss +7.00 at 800" in out
+    assert "max mean Q +4.00 at 500" in out
+    assert "max Q -" in out  # absent key
+    assert "max timeout share +0.50 at 400" in out
+    assert "clean success min 0.60 mean 0.60 max 0.60 last 0.60" in out
+
+
+def test_bad_input_is_one_line_error(tmp_path: Path, capsys) -> None:
+    mod = _module()
+    assert mod.main([str(tmp_path / "missing.jsonl")]) == 2
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("{not json\n")
+    assert mod.main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "no such file" in err and "not a training log" in err
