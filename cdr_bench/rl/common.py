@@ -71,6 +71,10 @@ class TrainArgs:
     los_penalty: float = 0.0
     """training-only extra penalty per step and per aircraft in LoS or NMAC with the controlled
     aircraft (0 = the scenario's own weights only)"""
+    soft_boundary: bool = False
+    """training-only: the paper's soft boundary (``sector.boundary_margin_km: null``, the reward
+    of cdr-bench 0.1 that the Diffusion-AC reference run was trained with: flights never end
+    outside the sector and the path term is unbounded) instead of each scenario's margin"""
     curriculum: bool = True
     """DPSC on (stages 1..12) or off (train on ``scenario``)"""
     window: int = 100
@@ -103,6 +107,7 @@ def training_env(args: TrainArgs) -> CurriculumEnv:
         failure_penalty=args.failure_penalty,
         max_episode_steps=args.max_episode_steps,
         los_penalty=args.los_penalty,
+        **({"sector": {"boundary_margin_km": None}} if args.soft_boundary else {}),
     )
 
 

@@ -99,3 +99,27 @@ def test_los_penalty_counts_the_aircraft_in_conflict():
         assert np.array_equal(sb.reward, sa.reward - 2.0 * n)
         hit += int((n > 0).sum())
     assert hit > 0  # random flight at high density meets conflicts: the test saw some
+
+
+def test_soft_boundary_is_the_reference_runs_reward_on_every_stage():
+    """--soft-boundary trains with sector.boundary_margin_km null on every stage the curriculum
+    builds (random flights then never end as boundary); the default keeps the margin."""
+    from cdr_bench.rl.common import TrainArgs, training_env
+    from cdr_bench.sim.core import BOUNDARY
+
+    soft = training_env(TrainArgs(n_envs=16, seed=2, soft_boundary=True))
+    hard = training_env(TrainArgs(n_envs=16, seed=2))
+    assert soft.config.sector.boundary_margin_km is None
+    assert hard.config.sector.boundary_margin_km == 50
+    rng = np.random.default_rng(0)
+    ends = {}
+    for name, env in (("soft", soft), ("hard", hard)):
+        out = []
+        for _ in range(150):
+            env.step(rng.integers(0, 27, env.flying.shape))
+            out += env.take_outcomes()
+        ends[name] = out
+    assert BOUNDARY in ends["hard"] and BOUNDARY not in ends["soft"]
+    soft.curriculum.stage = 12
+    soft._build()  # what a promotion does
+    assert soft.scenario == "curriculum/stage-12" and soft.config.sector.boundary_margin_km is None
