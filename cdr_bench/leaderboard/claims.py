@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED
+from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
 
 DIFFUSION = "Diffusion-AC"
 BASELINES = ("PPO", "TD3", "Safe-DQN-X", "Rainbow-DQN")
@@ -60,7 +60,13 @@ def _nmac_reduction(a: Any, b: Any) -> tuple[float | None, list[float] | None]:
         eps = [x for x in e.episodes if x["scenario"] == SCENARIO]
         return np.array(
             [
-                int(any(ac["outcome"] == "nmac" for ac in x["aircraft"] if ac["id"] == "ownship"))
+                int(
+                    any(
+                        ac["outcome"] == "nmac"
+                        for ac in x["aircraft"]
+                        if role_of(ac["id"]) == "ownship"
+                    )
+                )
                 for x in eps
             ],
             dtype=np.int64,

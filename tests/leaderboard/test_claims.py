@@ -31,7 +31,7 @@ class FakeEntry:
     @property
     def episodes(self) -> list[dict[str, Any]]:
         return [
-            {"scenario": "high", "aircraft": [{"id": "ownship", "outcome": "nmac" if f else "x"}]}
+            {"scenario": "high", "aircraft": [{"id": "ownship_0", "outcome": "nmac" if f else "x"}]}
             for f in self.nmac_flags
         ]
 
