@@ -209,11 +209,13 @@ def build_claims(
                 f"{_pct(value(base[nxt], 'nmac_rate'))}: reduction {100 * red:+.0f} % "
                 f"[{100 * ci[0]:+.0f}, {100 * ci[1]:+.0f}]"
             )
-            verdict = HELD if ci[0] <= NMAC_REDUCTION <= ci[1] else NOT_HELD
+            # a reduction must be shown (interval above 0) and be about 59 % (interval covers
+            # it): with a handful of NMAC episodes the interval covers everything, held nothing
+            verdict = HELD if 0.0 < ci[0] <= NMAC_REDUCTION <= ci[1] else NOT_HELD
         add("nmac-59", "NMAC reduced by about 59 % against the next-best baseline (high density)",
             "Abstract, §1", "1.2 % vs 3.0 % (Safe-DQN-X): -59 %", measured, verdict,
             "paired bootstrap of 1 - NMAC(Diffusion-AC) / NMAC(next best); "
-            "held if it covers 59 %")  # fmt: skip
+            "held if it is above 0 and covers 59 %")  # fmt: skip
 
     # 7: multimodality against PPO
     ppo = by_row.get("PPO")

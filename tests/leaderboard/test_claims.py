@@ -77,6 +77,12 @@ def test_best_of_five_held_only_when_significantly_best() -> None:
     assert tied["best-los_rate"] == "not held"  # worse
     assert tied["nmac-59"] == "not held"  # no reduction at all
     assert tied["dpsc-convergence"] == tied["fig7"] == "not measured"
+    # 2 NMAC episodes each, in different episodes: an interval that covers everything
+    few_dac, few_next = [1, 1] + [0] * (n - 2), [0, 0, 1, 1] + [0] * (n - 4)
+    rare = _verdicts(
+        _agents({"success_rate": 0.95, "los_rate": 0.03, "nmac_rate": 0.002}, few_dac, few_next)
+    )
+    assert rare["nmac-59"] == "not held"  # no reduction shown, though 59 % is inside
 
 
 def test_missing_rows_are_not_measured() -> None:
