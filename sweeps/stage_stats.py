@@ -1,6 +1,6 @@
 """What a Diffusion-AC training log says about its last curriculum stage (issue 16, item 5).
 
-    python agents/diffusion_ac/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
+    python sweeps/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
         agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5]
 
 For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it prints:

@@ -1,4 +1,4 @@
-"""agents/diffusion_ac/stage_stats.py: the numbers the Diffusion-AC README cites about stage 12."""
+"""sweeps/stage_stats.py: the numbers the Diffusion-AC README cites about stage 12."""
 
 from __future__ import annotations
 
@@ -10,9 +10,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location(
-        "stage_stats", ROOT / "agents" / "diffusion_ac" / "stage_stats.py"
-    )
+    spec = importlib.util.spec_from_file_location("stage_stats", ROOT / "sweeps" / "stage_stats.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
