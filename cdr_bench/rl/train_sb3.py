@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from cdr_bench.errors import UserError
 from cdr_bench.rl import common
 from cdr_bench.rl.common import (
     RunLog,
@@ -73,6 +74,15 @@ class Args(OffPolicyArgs):
     """PPO: GAE lambda"""
     ent_coef: float = 0.0
     """PPO: entropy bonus coefficient"""
+    teacher: str = ""
+    """PPO, MaskablePPO: an agent (folder or file of the agent protocol, e.g. agents/mvp) whose
+    demonstrations the policy and value head are fitted to before RL starts (imitation, then
+    RL; cdr_bench/rl/imitation.py); empty = none"""
+    teacher_transitions: int = 100_000
+    """PPO, MaskablePPO: demonstration transitions collected from ``teacher`` (not counted in
+    ``total_steps``)"""
+    teacher_epochs: int = 5
+    """PPO, MaskablePPO: passes over the demonstrations"""
 
 
 def _algorithm_class(algorithm: str) -> Any:
@@ -145,6 +155,10 @@ def train(algorithm: str, args: Args) -> dict:
     else:
         model = _new_model(algorithm, args, venv)
     log = RunLog(args, algorithm, saved["log"])
+    if args.teacher and not args.resume:
+        if td3:
+            raise UserError("--teacher: PPO and MaskablePPO only (TD3 has no categorical policy)")
+        log.write({"step": 0, **_imitate(model, args, masked=algorithm == "maskable-ppo")})
     kind = "td3" if td3 else "ppo"
 
     losses: dict[str, float] = saved.get("losses", {})  # of the last update, as SB3 logs them
@@ -221,6 +235,26 @@ def train(algorithm: str, args: Args) -> dict:
     }
     summary.update(quick_evaluation(greedy(), args.eval_episodes))
     return log.finish(summary, TITLES[algorithm])
+
+
+def _imitate(model: Any, args: Args, masked: bool) -> dict[str, float]:
+    """Fit ``model``'s policy and value head to ``args.teacher``'s demonstrations."""
+    import gymnasium as gym
+
+    from cdr_bench.actions import N_ACTIONS
+    from cdr_bench.evaluate.loader import load_agent
+    from cdr_bench.rl.imitation import demonstrations, fit_policy
+    from cdr_bench.vector_env import observation_space
+
+    env = training_env(args)  # the spaces the agent protocol gives (those of the first stage)
+    teacher = load_agent(
+        args.teacher, observation_space(env.config), gym.spaces.Discrete(N_ACTIONS)
+    )
+    teacher.reset(args.seed)
+    data = demonstrations(teacher.act_batch, args, args.teacher_transitions)
+    return fit_policy(
+        model.policy, data, args.teacher_epochs, args.ppo_batch_size, args.seed, masked
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser, name: str | None = None) -> None:
