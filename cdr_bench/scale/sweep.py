@@ -35,6 +35,7 @@ never imports it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -102,6 +103,30 @@ def _claim_attempt(root: Path, key: str) -> tuple[Path, int, str]:
     fd = os.open(work / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
     fcntl.flock(fd, fcntl.LOCK_EX)
     return work, fd, ""
+
+
+def remove_idle_work(out: Path) -> None:
+    """Remove the work folders of ``out`` that no live attempt holds (and ``.work`` once empty).
+    Another sweep process may run in the same output folder (one per core, several seeds): its
+    attempts hold the lock of their folder until they land, so they are left alone."""
+    import fcntl
+
+    work = out / ".work"
+    if not work.is_dir():
+        return
+    for d in work.iterdir():
+        lock = d / ".lock"
+        if lock.is_file():
+            fd = os.open(lock, os.O_RDWR)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # a live attempt of another sweep process
+                continue
+            finally:
+                os.close(fd)
+        shutil.rmtree(d, ignore_errors=True)
+    with contextlib.suppress(OSError):
+        work.rmdir()
 
 
 def _run_attempt(trial: Trial, root: Path, final: Path, work: Path, resumed: str) -> dict[str, Any]:
@@ -220,7 +245,7 @@ def run_sweep(
     failures: dict[str, str] = {}
     if todo:
         failures = _run_on_ray(todo, out, sweep, address, num_cpus, say)
-    shutil.rmtree(out / ".work", ignore_errors=True)
+    remove_idle_work(out)
     summary = {
         "name": sweep.name,
         "sweep_file": str(sweep.source),
