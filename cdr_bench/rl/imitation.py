@@ -21,10 +21,30 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cdr_bench.actions import N_ACTIONS
+from cdr_bench.errors import UserError
 from cdr_bench.rl.common import TrainArgs, training_env
 
 TEACHER_SEED_OFFSET = 7_919
 """the teacher's environment is seeded ``seed + TEACHER_SEED_OFFSET`` (its own episodes)"""
+
+
+def _teacher_actions(act_batch: Any, obs: NDArray[Any], mask: NDArray[Any]) -> NDArray[np.int64]:
+    """The teacher's (N,) actions, checked: integers in 0..26 (else a :class:`UserError`)."""
+    try:
+        out = np.asarray(act_batch(obs, mask))
+    except Exception as e:
+        raise UserError(f"--teacher: act_batch raised {type(e).__name__}: {e}") from None
+    if (
+        out.shape != (len(obs),)
+        or out.dtype.kind not in "iu"
+        or not ((out >= 0) & (out < N_ACTIONS)).all()
+    ):
+        raise UserError(
+            f"--teacher: act_batch must return {len(obs)} integer actions in 0..{N_ACTIONS - 1}, "
+            f"got shape {out.shape}, dtype {out.dtype}"
+        )
+    return out.astype(np.int64)
 
 
 def demonstrations(act_batch: Any, args: TrainArgs, transitions: int) -> dict[str, NDArray[Any]]:
@@ -44,7 +64,7 @@ def demonstrations(act_batch: Any, args: TrainArgs, transitions: int) -> dict[st
         acting = env.flying
         actions = np.full(acting.shape, 13, dtype=np.int64)
         if acting.any():
-            actions[acting] = np.asarray(act_batch(obs[acting], mask[acting]), np.int64)
+            actions[acting] = _teacher_actions(act_batch, obs[acting], mask[acting])
         st = env.step(actions)
         slots = np.flatnonzero(acting)
         cols["obs"].append(obs[acting])

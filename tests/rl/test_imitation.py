@@ -86,3 +86,19 @@ def test_bad_teacher_is_a_clear_error(tmp_path, algo, teacher, message) -> None:
     )  # fmt: skip
     assert r.returncode != 0
     assert message in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        lambda o, m: np.full(len(o), 27),  # out of range
+        lambda o, m: np.zeros(len(o) + 1, np.int64),  # wrong length
+        lambda o, m: np.zeros(len(o)) + 0.5,  # not integers
+        lambda o, m: 1 / 0,  # raises
+    ],
+)
+def test_a_bad_teacher_is_a_user_error(bad) -> None:
+    from cdr_bench.errors import UserError
+
+    with pytest.raises(UserError, match="--teacher: act_batch"):
+        demonstrations(bad, ARGS, 10)
