@@ -598,8 +598,12 @@ class MLP:
         return cls(layers, activation, out_activation)
 
     def __call__(self, observations: Any) -> Array:
-        """(N, in) -> (N, out) float32."""
-        return _mlp(_obs(observations), self.ws, self.bs, self.acts)
+        """(N, in) -> (N, out) float32; a ValueError for another input width (a checkpoint
+        trained on other inputs, e.g. with ``--mvp-input``)."""
+        x = _obs(observations)
+        if x.shape[1] != self.in_dim:
+            raise ValueError(f"this network takes {self.in_dim} inputs, got {x.shape[1]}")
+        return _mlp(x, self.ws, self.bs, self.acts)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -89,6 +89,7 @@ def vector_env_to_sb3(
     source: Any,
     include_mask: bool = True,
     continuous_actions: Callable[[np.ndarray], np.ndarray] | None = None,
+    extra_features: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> Any:
     """The Stable-Baselines3 ``VecEnv`` of a :class:`~cdr_bench.vector_env.VectorEnv` without
     auto-reset (the adapter restarts its episodes), or of a source with the same face that
@@ -107,8 +108,11 @@ def vector_env_to_sb3(
     * ``seed(s)`` re-seeds the episode-seed stream at the next ``reset()``.
     * ``continuous_actions``: the action space is ``Box(-1, 1, (3,))`` and this maps (N, 3)
       actions to action indices (TD3).
+    * ``extra_features``: maps (N, F) observations and (N, 27) masks to (N, X) features in
+      [0, 1], appended to each observation (after the mask flags); e.g.
+      :func:`cdr_bench.resolvers.mvp_onehot` for a learned residual on top of ``mvp``.
     """
-    return _adapter_class()(source, include_mask, continuous_actions)
+    return _adapter_class()(source, include_mask, continuous_actions, extra_features)
 
 
 _HOLD_ONLY = np.arange(N_ACTIONS) == 13
@@ -126,14 +130,20 @@ def _adapter_class() -> type:
             source: Any,
             include_mask: bool,
             continuous_actions: Callable[[np.ndarray], np.ndarray] | None,
+            extra_features: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
         ):
             self.source, self.include_mask = source, include_mask
-            self.to_index = continuous_actions
+            self.to_index, self.extra = continuous_actions, extra_features
             self._shape = (source.num_envs, source.n_agents)
             low, high = observation_bounds(source.config)
             if include_mask:
                 low = np.concatenate([low, np.zeros(N_ACTIONS, np.float32)])
                 high = np.concatenate([high, np.ones(N_ACTIONS, np.float32)])
+            if extra_features is not None:
+                f = source.observe()[0].shape[-1]
+                x = extra_features(np.zeros((1, f), np.float32), np.ones((1, N_ACTIONS))).shape[1]
+                low = np.concatenate([low, np.zeros(x, np.float32)])
+                high = np.concatenate([high, np.ones(x, np.float32)])
             act_space: spaces.Space = (
                 spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
                 if continuous_actions is not None
@@ -154,6 +164,10 @@ def _adapter_class() -> type:
             if self.include_mask:
                 flags = np.where(live, masks.reshape(live.shape[0], -1), 0).astype(np.float32)
                 out = np.concatenate([out, flags], axis=1)
+            if self.extra is not None:
+                rows = obs.reshape(live.shape[0], -1)
+                extra = self.extra(rows, masks.reshape(live.shape[0], -1))
+                out = np.concatenate([out, np.where(live, extra, 0).astype(np.float32)], axis=1)
             return out
 
         def _observe(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:

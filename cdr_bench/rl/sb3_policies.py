@@ -43,9 +43,12 @@ def td3_actor(obs_dim: int, width: int = 128, layers: int = 3, act_dim: int = 3)
     return nn.Sequential(*mods)
 
 
-def export_actor(model: Any, kind: str, path: str, meta: dict) -> None:
-    """Write the actor of a trained SB3 ``model`` (kind "ppo" or "td3") to ``path``."""
+def export_actor(model: Any, kind: str, path: str, meta: dict, **config_extra: Any) -> None:
+    """Write the actor of a trained SB3 ``model`` (kind "ppo" or "td3") to ``path``;
+    ``config_extra`` goes into its config (``mvp_input=True``: the observation has
+    :func:`cdr_bench.resolvers.mvp_onehot` appended)."""
     config, sd = actor_state(model, kind)
+    config.update(config_extra)
     torch.save({"config": config, "state_dict": sd, "meta": meta}, path)
 
 

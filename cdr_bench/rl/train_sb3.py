@@ -83,6 +83,10 @@ class Args(OffPolicyArgs):
     ``total_steps``)"""
     teacher_epochs: int = 5
     """PPO, MaskablePPO: passes over the demonstrations"""
+    mvp_input: bool = False
+    """append the one-hot of ``mvp``'s action (cdr_bench/resolvers.py) to the observation: a
+    learned residual on top of ``mvp`` (with ``--teacher agents/mvp`` it starts as a copy of
+    it); the checkpoint records it and agents/mvp_residual plays it"""
 
 
 def _algorithm_class(algorithm: str) -> Any:
@@ -123,6 +127,7 @@ def train(algorithm: str, args: Args) -> dict:
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
+    from cdr_bench.resolvers import mvp_onehot, with_mvp_input
     from cdr_bench.rl.baselines import continuous_to_index
     from cdr_bench.rl.sb3_policies import actor_of, export_actor
     from cdr_bench.wrappers import vector_env_to_sb3
@@ -134,7 +139,10 @@ def train(algorithm: str, args: Args) -> dict:
     td3 = algorithm == "td3"
     env = training_env(args)
     venv = vector_env_to_sb3(
-        env, include_mask=False, continuous_actions=continuous_to_index if td3 else None
+        env,
+        include_mask=False,
+        continuous_actions=continuous_to_index if td3 else None,
+        extra_features=mvp_onehot if args.mvp_input else None,
     )
     zip_path = os.path.join(args.run_dir, "state.zip")
     state_path = os.path.join(args.run_dir, "state.pt")
@@ -168,8 +176,9 @@ def train(algorithm: str, args: Args) -> dict:
         net = actor_of(model, kind)
 
         def act_batch(o: np.ndarray, m: np.ndarray) -> np.ndarray:
+            x = with_mvp_input(o, m) if args.mvp_input else o
             with torch.no_grad():
-                out = net(torch.from_numpy(o))
+                out = net(torch.from_numpy(x))
             if td3:
                 return continuous_to_index(out.numpy())
             if algorithm == "maskable-ppo":
@@ -204,7 +213,8 @@ def train(algorithm: str, args: Args) -> dict:
             "wall_s": round(log.wall(), 1),
             "algorithm": algorithm,
         }
-        export_actor(model, kind, os.path.join(args.run_dir, "checkpoint.pt"), meta)
+        inputs = {"mvp_input": True} if args.mvp_input else {}
+        export_actor(model, kind, os.path.join(args.run_dir, "checkpoint.pt"), meta, **inputs)
 
     class Progress(BaseCallback):
         """Log lines, checkpoints and the wall-time limit, after every vector step."""
@@ -252,6 +262,10 @@ def _imitate(model: Any, args: Args, masked: bool) -> dict[str, float]:
     )
     teacher.reset(args.seed)
     data = demonstrations(teacher.act_batch, args, args.teacher_transitions)
+    if args.mvp_input:
+        from cdr_bench.resolvers import with_mvp_input
+
+        data["obs"] = with_mvp_input(data["obs"], data["mask"])
     return fit_policy(
         model.policy, data, args.teacher_epochs, args.ppo_batch_size, args.seed, masked
     )
