@@ -73,7 +73,7 @@ def register(sub: Any) -> None:
 
     r = sub.add_parser(
         "report",
-        help="Markdown table of result files (every metric and role, 95 % intervals)",
+        help="Markdown table of result files (every metric and role, 95 %% intervals)",
         description="One Markdown table over result JSON files (one row per agent, scenario "
         "and aircraft role, every metric with its 95 % interval), rendered by "
         "cdr_bench.evaluate.report like every other results table. The tables in the "
