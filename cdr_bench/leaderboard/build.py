@@ -341,7 +341,7 @@ def untracked_agent_files(sub: Submission, root: Path) -> list[str]:
     if r.returncode != 0:
         return []
     untracked = {(root / p).resolve() for p in r.stdout.split("\0") if p}
-    return sorted(str(f.relative_to(root.resolve())) for f in files if f in untracked)
+    return sorted({str(f.relative_to(root.resolve())) for f in files if f in untracked})
 
 
 def _evaluate_all(
