@@ -31,6 +31,13 @@ class Agent:
         self.checkpoint = (
             checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(DEFAULT_CHECKPOINT)
         )
+        if not os.path.isfile(self.checkpoint):
+            raise FileNotFoundError(
+                f"no checkpoint at {self.checkpoint}: none is shipped (no residual is safer than "
+                "mvp yet; agents/mvp_residual/README.md); train one with `cdr-bench train "
+                "maskable-ppo --mvp-input --teacher agents/mvp ...` and point "
+                "CDR_BENCH_CHECKPOINT at its checkpoint.pt"
+            )
         ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
         config = ck["config"]
         if config.get("kind") != "ppo" or not config.get("mvp_input"):
