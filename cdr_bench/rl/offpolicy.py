@@ -60,6 +60,9 @@ class OffPolicyArgs(TrainArgs):
     """transitions collected before the first update"""
     polyak: float = 5e-3
     """target-network Polyak coefficient"""
+    stop_at: int = 0
+    """pause once this many transitions are trained (state saved, as an interruption would
+    leave it; schedules still span total_steps), then continue with --resume; 0 = no pause"""
 
 
 class Learner(Protocol):
@@ -230,7 +233,7 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
     # The loop, batched over the n_envs episodes.
     obs, mask = env.observe()
     while loop.step < args.total_steps:
-        if log.out_of_time():
+        if log.out_of_time() or 0 < args.stop_at <= loop.step:
             break
         # Act for every flying aircraft, step, store the transitions.
         hyper = learner.schedule(loop.step, env.stage)

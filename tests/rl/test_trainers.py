@@ -147,6 +147,25 @@ CURVE = ["--curve-every", "150", "--curve-episodes", "3"]
 
 
 @pytest.mark.slow
+def test_stop_at_pauses_without_changing_the_run(tmp_path):
+    """``--stop-at`` pauses an off-policy run at a transition count with its schedules still
+    spanning ``--total-steps``; resumed, it ends exactly as a run never paused."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    total = ["--total-steps", "600", *CURVE]
+    train_in_process("rainbow", a, *total)
+    paused = train_in_process("rainbow", b, *total, "--stop-at", "250")
+    assert 250 <= paused["step"] < 300
+    assert torch.load(b / "state.pt", weights_only=False)["loop"]["step"] == paused["step"]
+    train_in_process("rainbow", b, *total, "--resume")
+    ca = torch.load(a / "checkpoint.pt", weights_only=True)
+    cb = torch.load(b / "checkpoint.pt", weights_only=True)
+    assert ca["meta"]["step"] == cb["meta"]["step"] >= 600
+    for k, v in ca["state_dict"].items():
+        assert torch.equal(v, cb["state_dict"][k]), k
+    assert json.dumps(log_lines(a)) == json.dumps(log_lines(b))
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(AGENT_DIR))
 def test_learning_curve_points_leave_training_unchanged(tmp_path, name):
     """Evaluating the greedy policy on the fixed evaluation set every ``curve_every``
