@@ -1,0 +1,56 @@
+"""sweeps/rainbow_replay_reset.py: the round-1 resume schedule (replay emptied at given
+transition counts) on a tiny budget, and continuing after an interruption."""
+
+import importlib.util
+import json
+
+import pytest
+
+from .helpers import ROOT
+
+torch = pytest.importorskip("torch")
+
+spec = importlib.util.spec_from_file_location("rrr", ROOT / "sweeps" / "rainbow_replay_reset.py")
+rrr = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(rrr)
+
+TINY = [
+    "--n-envs", "4", "--log-every", "100", "--checkpoint-every", "200", "--width", "16",
+    "--learning-starts", "64", "--batch-size", "16", "--buffer-size", "2000", "--curve-every", "0",
+]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_replay_emptied_at_each_reset_and_the_run_finishes(tmp_path):
+    run = tmp_path / "run"
+    flags = [str(run), "--resets", "200", "400", "--total-steps", "600", "--no-evaluate"]
+    assert rrr.main([*flags, *TINY]) == 0
+    resets = json.loads((run / "resets.json").read_text())
+    assert len(resets) == 2 and 200 <= resets[0] < 250 and 400 <= resets[1] < 450
+    state = torch.load(run / "state.pt", weights_only=False)
+    assert state["loop"]["step"] >= 600
+    # Since the last reset the replay holds only what was collected after it.
+    n = len(state["replay"]["buffer"]["data"]["action"])
+    assert 0 < n <= state["loop"]["step"] - resets[1] + 4
+    # Re-running a finished run trains nothing more and empties nothing more.
+    before = (run / "checkpoint.pt").read_bytes()
+    assert rrr.main([*flags, *TINY]) == 0
+    assert json.loads((run / "resets.json").read_text()) == resets
+    assert (run / "checkpoint.pt").read_bytes() == before
+
+
+def test_empty_replay_keeps_everything_else(tmp_path):
+    run = tmp_path / "run"
+    assert rrr.main([str(run), "--resets", "--total-steps", "200", "--no-evaluate", *TINY]) == 0
+    before = torch.load(run / "state.pt", weights_only=False)
+    assert len(before["replay"]["buffer"]["data"]["action"]) > 0
+    step = rrr.empty_replay(run)
+    after = torch.load(run / "state.pt", weights_only=False)
+    assert step == before["loop"]["step"]
+    assert len(after["replay"]["buffer"]["data"]["action"]) == 0
+    assert after["replay"]["buffer"]["tree"].sum() == 0
+    assert after["loop"]["learn_from"] == step + 64
+    assert after["rng"] == before["rng"] and torch.equal(after["torch_rng"], before["torch_rng"])
+    for part in ("net", "target"):
+        for k, v in before["learner"][part].items():
+            assert torch.equal(v, after["learner"][part][k]), (part, k)
