@@ -712,21 +712,31 @@ class RainbowQ:
 class SafeDQNQ:
     """Q_S and Q_G of :class:`cdr_bench.rl.safe_dqn.SafeDQNNet` and its rule (``sum``: argmax
     of Q_S + Q_G; ``lexicographic``: the largest Q_G among feasible actions whose Q_S is within
-    ``slack`` of the best), over the feasible actions only."""
+    ``slack`` of the best; ``mvp-improve``: ``base``, mvp's action, unless some feasible action's
+    Q_S exceeds Q_S(base) by more than ``slack``, then the largest Q_S + Q_G among those), over
+    the feasible actions only."""
 
     def __init__(self, sd: Mapping[str, Array], config: Mapping[str, Any]):
         self.safety = MLP.from_state_dict(sd, "q_safety.", "relu")
         self.goal = MLP.from_state_dict(sd, "q_goal.", "relu")
         self.rule = str(config.get("rule", "sum"))
         self.slack = np.float32(config.get("slack", 0.1))
-        if self.rule not in ("sum", "lexicographic"):
+        if self.rule not in ("sum", "lexicographic", "mvp-improve"):
             raise ValueError(f"unknown combination rule {self.rule!r}")
 
-    def act(self, observations: Any, masks: Any) -> NDArray[np.int64]:
+    def act(self, observations: Any, masks: Any, base: Any | None = None) -> NDArray[np.int64]:
         qs, qg = self.safety(observations), self.goal(observations)
         if self.rule == "sum":
             return masked_argmax(qs + qg, masks)  # float32 sum (exact-rounded, elementwise)
         feasible = _mask_bool(masks, qs.shape[0])
+        if self.rule == "mvp-improve":
+            if base is None:
+                raise ValueError("the mvp-improve rule needs mvp's actions (base)")
+            b = np.asarray(base, np.int64)
+            q_base = qs[np.arange(len(b)), b][:, None]
+            better = feasible & (qs > q_base + self.slack)  # float32 add, exact compares
+            best = masked_argmax(qs + qg, better)
+            return np.where(better.any(axis=1), best, b)
         best = np.where(feasible, qs, np.float32(-np.inf)).max(axis=1, keepdims=True)
         safe = feasible & ~(qs < best - self.slack)  # max and compares are exact
         return masked_argmax(qg, safe)

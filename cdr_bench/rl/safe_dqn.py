@@ -16,6 +16,14 @@ offers two documented rules (:func:`combine`), chosen with ``--combine``:
   ``slack`` of the best feasible Q_S; among them pick the largest Q_G. Thresholded lexicographic
   Q-learning (Gabor, Kalmar & Szepesvari, ICML 1998; Skalse et al., "Lexicographic Multi-Objective
   Reinforcement Learning", IJCAI 2022). Both components again bootstrap with that action.
+* ``mvp-improve`` -- not a rule of the paper: one step of policy improvement on the geometric
+  resolver ``mvp`` (:func:`cdr_bench.resolvers.mvp_actions`). The two networks *evaluate*
+  ``mvp`` (they bootstrap with ``mvp``'s action in the next state, whatever the behaviour was;
+  the behaviour is ``mvp`` with epsilon-random feasible actions), and the policy is ``mvp``'s
+  action unless some feasible action's Q_S exceeds Q_S of ``mvp``'s action by more than
+  ``slack``; then it is the largest Q_S + Q_G among those actions. Policy improvement
+  (Howard 1960; Bertsekas' rollout) with a margin against the critic's error: with exact Q
+  values it is never worse than ``mvp``.
 
 Masks: every rule chooses among the feasible actions only, in acting and in the targets.
 Targets are double-Q style: the online networks choose the next action with the rule, the
@@ -32,9 +40,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from cdr_bench.resolvers import mvp_actions
 from cdr_bench.rl.networks import N_ACTIONS, LearnerParts, frozen_copy, mlp, polyak_update
 
-RULES = ("sum", "lexicographic")
+RULES = ("sum", "lexicographic", "mvp-improve")
 
 
 def combine(
@@ -43,14 +52,24 @@ def combine(
     mask: torch.Tensor,
     rule: str = "sum",
     slack: float = 0.1,
+    base: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """(N, 27) safety and goal Q values, (N, 27) feasibility flags -> (N,) chosen actions.
 
     ``sum``: argmax over feasible a of Q_S(s, a) + Q_G(s, a).
     ``lexicographic``: S = {feasible a : Q_S(s, a) >= max_feasible Q_S(s, .) - slack};
     argmax over a in S of Q_G(s, a).
+    ``mvp-improve`` (``base``: (N,) ``mvp``'s actions): B = {feasible a : Q_S(s, a) >
+    Q_S(s, base) + slack}; argmax over a in B of Q_S + Q_G if B is not empty, else base.
     """
     infeasible = mask == 0
+    if rule == "mvp-improve":
+        if base is None:
+            raise ValueError("the mvp-improve rule needs mvp's actions (base)")
+        q_base = q_safety.gather(1, base[:, None])
+        better = (q_safety > q_base + slack) & ~infeasible
+        best = (q_safety + q_goal).masked_fill(~better, -torch.inf).argmax(dim=1)
+        return torch.where(better.any(dim=1), best, base)
     if rule == "sum":
         return (q_safety + q_goal).masked_fill(infeasible, -torch.inf).argmax(dim=1)
     if rule == "lexicographic":
@@ -84,9 +103,11 @@ class SafeDQNNet(nn.Module):
         return self.q_safety(obs), self.q_goal(obs)
 
     @torch.no_grad()
-    def act(self, obs: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def act(
+        self, obs: torch.Tensor, mask: torch.Tensor, base: torch.Tensor | None = None
+    ) -> torch.Tensor:
         qs, qg = self(obs)
-        return combine(qs, qg, mask, self.cfg.rule, self.cfg.slack)
+        return combine(qs, qg, mask, self.cfg.rule, self.cfg.slack, base)
 
 
 class SafeDQN(LearnerParts):
@@ -123,7 +144,16 @@ class SafeDQN(LearnerParts):
         return {"epsilon": self.epsilon}
 
     def act(self, obs: np.ndarray, mask: np.ndarray, explore: bool) -> np.ndarray:
-        actions = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
+        if self.cfg.rule == "mvp-improve":
+            base = mvp_actions(obs, mask)
+            if explore:  # the behaviour is mvp (with epsilon-random actions below)
+                actions = base
+            else:
+                base_t = torch.from_numpy(base)
+                chosen = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask), base_t)
+                actions = chosen.numpy()
+        else:
+            actions = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
         if explore and self.epsilon_schedule is not None:
             assert self.rng is not None
             rows = self.rng.random(len(actions)) < self.epsilon
@@ -136,9 +166,13 @@ class SafeDQN(LearnerParts):
     @torch.no_grad()
     def targets(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """y_S = r_S + gamma (1 - done) Q_S'(s', a*), y_G likewise, a* = rule on the online
-        networks over the next state's feasible actions."""
-        qs_on, qg_on = self.net(b["next_obs"])
-        a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)
+        networks over the next state's feasible actions (``mvp-improve``: a* = mvp's action, so
+        the networks evaluate mvp)."""
+        if self.cfg.rule == "mvp-improve":
+            a_star = torch.from_numpy(mvp_actions(b["next_obs"].numpy(), b["next_mask"].numpy()))
+        else:
+            qs_on, qg_on = self.net(b["next_obs"])
+            a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)
         qs_t, qg_t = self.target(b["next_obs"])
         idx = torch.arange(len(a_star))
         cont = self.gamma * (1.0 - b["done"])

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from cdr_bench.rl.safe_dqn import SafeDQN
 
 # torch is imported inside build(): building the cdr-bench parser must not import it.
-RULES = ("sum", "lexicographic")
+RULES = ("sum", "lexicographic", "mvp-improve")
 """Combination rules (:data:`cdr_bench.rl.safe_dqn.RULES`; a test checks)."""
 
 
@@ -36,9 +36,11 @@ class Args(OffPolicyArgs):
     lr: float = 1e-4
     """Adam step size"""
     combine: str = "sum"
-    """combination rule of the two Q networks: "sum" or "lexicographic" (see safe_dqn.py)"""
+    """combination rule of the two Q networks: "sum", "lexicographic" or "mvp-improve" (one
+    step of policy improvement on mvp; see safe_dqn.py)"""
     slack: float = 0.1
-    """lexicographic rule: actions within this of the best safety Q count as safe"""
+    """lexicographic: actions within this of the best safety Q count as safe; mvp-improve: the
+    safety-Q gain over mvp's action needed to deviate from it"""
     eps_start: float = 1.0
     """epsilon of epsilon-greedy at the start"""
     eps_end: float = 0.05

@@ -1,0 +1,59 @@
+"""One step of policy improvement on ``mvp`` (cdr-bench agent protocol), trained by
+
+    cdr-bench train safe-dqn-x --combine mvp-improve ...
+
+Two Q networks (safety and goal reward, :class:`cdr_bench.rl.safe_dqn.SafeDQNNet`) that
+*evaluate* the geometric resolver ``mvp``. The decision is ``mvp``'s action unless some feasible
+action's safety Q exceeds that of ``mvp``'s action by more than the checkpoint's ``slack``; then
+the largest Q_S + Q_G among those actions (:func:`cdr_bench.rl.safe_dqn.combine`, rule
+``mvp-improve``). ``checkpoint.pt`` beside this file (or ``CDR_BENCH_CHECKPOINT``) holds the
+weights only, read with ``torch.load(weights_only=True)``; the margin is part of the checkpoint
+(``sweeps/mvp_improve_margin.py`` writes copies with other margins and chooses one on episodes
+other than the scored ones). The networks run on the fixed
+numeric path of :mod:`cdr_bench.inference` and ``mvp`` uses only correctly rounded arithmetic,
+so the decision is the same on every x86-64 CPU.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from cdr_bench.inference import SafeDQNQ
+from cdr_bench.resolvers import mvp_actions
+
+DEFAULT_CHECKPOINT = Path(__file__).with_name("checkpoint.pt")
+
+
+class Agent:
+    def __init__(self, observation_space=None, action_space=None, checkpoint: str | None = None):
+        self.checkpoint = (
+            checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(DEFAULT_CHECKPOINT)
+        )
+        if not os.path.isfile(self.checkpoint):
+            raise FileNotFoundError(
+                f"no checkpoint at {self.checkpoint}: none is shipped yet "
+                "(agents/mvp_improve/README.md); train one with `cdr-bench train safe-dqn-x "
+                "--combine mvp-improve ...` and point CDR_BENCH_CHECKPOINT at its checkpoint.pt"
+            )
+        ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
+        config = ck["config"]
+        if config.get("rule") != "mvp-improve":
+            raise ValueError(
+                f"{self.checkpoint}: not trained with --combine mvp-improve "
+                f"(rule {config.get('rule')!r})"
+            )
+        state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
+        self.net = SafeDQNQ(state, config)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Deterministic policy: nothing to re-seed."""
+
+    def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        return self.net.act(observations, masks, base=mvp_actions(observations, masks))
+
+    def act(self, obs_dict: dict) -> int:
+        return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])

@@ -1,0 +1,80 @@
+"""Choose the margin of an ``mvp-improve`` checkpoint on validation episodes (issue 16).
+
+    python sweeps/mvp_improve_margin.py RUN/checkpoint.pt --slack 0 0.05 0.1 0.2 0.5
+
+The rule of agents/mvp_improve deviates from ``mvp`` only where some action's safety Q beats
+``mvp``'s by more than the margin (``slack`` in the checkpoint's config). For each margin this
+writes a copy of the checkpoint with that margin (``<checkpoint folder>/slack-<x>/checkpoint.pt``;
+its bytes, so its identity, differ) and scores it and ``mvp`` on the same ``--episodes`` of
+``high`` drawn from ``--seed`` (default 500000: not the leaderboard's episodes, which start at
+seed 0), then prints clean success, LoS and NMAC of each beside ``mvp``'s. Pick the margin here,
+then score the chosen copy on the leaderboard's episodes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def with_slack(checkpoint: Path, out_dir: Path, slacks: list[float]) -> list[Path]:
+    """Copies of ``checkpoint`` with each margin; returns their paths."""
+    import torch
+
+    ck = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    if ck["config"].get("rule") != "mvp-improve":
+        raise SystemExit(f"{checkpoint}: not trained with --combine mvp-improve")
+    paths = []
+    for x in slacks:
+        path = out_dir / f"slack-{x:g}" / "checkpoint.pt"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        copy = {**ck, "config": {**ck["config"], "slack": float(x)}}
+        torch.save(copy, str(path) + ".tmp")
+        os.replace(str(path) + ".tmp", path)
+        paths.append(path)
+    return paths
+
+
+def evaluate(agent: str, out: Path, episodes: int, seed: int, checkpoint: Path | None) -> dict:
+    if not out.exists():
+        env = dict(os.environ)
+        env.pop("CDR_BENCH_CHECKPOINT", None)
+        if checkpoint is not None:
+            env["CDR_BENCH_CHECKPOINT"] = str(checkpoint.resolve())
+        cmd = [sys.executable, "-m", "cdr_bench", "evaluate", agent, "--scenario", "high"]
+        cmd += ["--episodes", str(episodes), "--seed", str(seed), "--out", str(out.resolve())]
+        subprocess.run([*cmd, "--no-progress"], check=True, env=env, cwd=ROOT)
+    own = json.loads(out.read_text())["scenarios"][0]["metrics"]["ownship"]
+    return {k: own[k]["value"] for k in ("clean_success_rate", "los_rate", "nmac_rate")}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("checkpoint", type=Path)
+    p.add_argument("--slack", type=float, nargs="+", required=True)
+    p.add_argument("--episodes", type=int, default=500)
+    p.add_argument("--seed", type=int, default=500_000)
+    a = p.parse_args(argv)
+    if not a.checkpoint.is_file():
+        raise SystemExit(f"{a.checkpoint}: no such checkpoint")
+    folder = a.checkpoint.parent
+    tag = f"high-{a.episodes}-seed{a.seed}.json"
+    rows = [("mvp", evaluate("agents/mvp", folder / f"mvp-{tag}", a.episodes, a.seed, None))]
+    for x, path in zip(a.slack, with_slack(a.checkpoint, folder, a.slack), strict=True):
+        m = evaluate("agents/mvp_improve", path.parent / tag, a.episodes, a.seed, path)
+        rows.append((f"slack {x:g}", m))
+    print(f"{'':12} clean success    LoS   NMAC   ({a.episodes} episodes of high, seed {a.seed})")
+    for name, m in rows:
+        c, los, nmac = (100 * m[k] for k in ("clean_success_rate", "los_rate", "nmac_rate"))
+        print(f"{name:12} {c:12.1f} % {los:5.1f} % {nmac:5.1f} %")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

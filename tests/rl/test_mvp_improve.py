@@ -1,0 +1,150 @@
+"""One step of policy improvement on ``mvp`` (``--combine mvp-improve``, agents/mvp_improve):
+the rule by hand, the same decision in torch and on the fixed inference path, the networks
+evaluate mvp (its action in the targets, its action as behaviour), and the agent's errors."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from cdr_bench.inference import SafeDQNQ  # noqa: E402
+from cdr_bench.resolvers import mvp_actions  # noqa: E402
+from cdr_bench.rl.common import TrainArgs, training_env  # noqa: E402
+from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig, combine  # noqa: E402
+
+from .helpers import ROOT, cdr_bench  # noqa: E402
+
+_spec = importlib.util.spec_from_file_location("margin", ROOT / "sweeps/mvp_improve_margin.py")
+margin = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(margin)
+
+
+def _q(*rows):
+    q = torch.full((len(rows), 27), -100.0)
+    for i, r in enumerate(rows):
+        q[i, : len(r)] = torch.tensor(r)
+    return q
+
+
+def test_rule_by_hand():
+    qs = _q([-1.0, -0.5, -0.2, -0.3])
+    qg = _q([0.0, 0.0, -2.0, 1.0])
+    mask = torch.ones(1, 27, dtype=torch.int8)
+    base = torch.tensor([0])
+    # gains over action 0: 0.5, 0.8, 0.7; slack 0.6 -> {2, 3}; best Q_S + Q_G there: 3 (0.7)
+    assert combine(qs, qg, mask, "mvp-improve", 0.6, base).item() == 3
+    # slack 0.75 -> only action 2
+    assert combine(qs, qg, mask, "mvp-improve", 0.75, base).item() == 2
+    # slack 0.9 -> nothing is enough better: mvp's action
+    assert combine(qs, qg, mask, "mvp-improve", 0.9, base).item() == 0
+    # a masked action never wins
+    mask[0, 2] = 0
+    assert combine(qs, qg, mask, "mvp-improve", 0.75, base).item() == 0
+    with pytest.raises(ValueError, match="needs mvp's actions"):
+        combine(qs, qg, mask, "mvp-improve", 0.1)
+
+
+def _states(n=400):
+    env = training_env(TrainArgs(n_envs=16, curriculum=False, scenario="high", seed=5))
+    rows, masks = [], []
+    rng = np.random.default_rng(0)
+    while sum(len(r) for r in rows) < n:
+        obs, mask = env.observe()
+        f = env.flying.reshape(-1)
+        rows.append(obs.reshape(-1, obs.shape[-1])[f])
+        masks.append(mask.reshape(-1, 27)[f])
+        acts = mvp_actions(obs.reshape(-1, obs.shape[-1]), mask.reshape(-1, 27))
+        acts = np.where(rng.random(len(acts)) < 0.2, 13, acts)
+        env.step(acts.reshape(env.flying.shape))
+    return np.concatenate(rows)[:n], np.concatenate(masks)[:n]
+
+
+def test_torch_and_inference_path_decide_alike():
+    obs, mask = _states()
+    torch.manual_seed(1)
+    learner = SafeDQN(SafeDQNConfig(obs_dim=obs.shape[1], width=32, rule="mvp-improve", slack=0.02))
+    with torch.no_grad():
+        for p in learner.net.parameters():
+            p.mul_(3.0)  # spread the Q values so that the rule deviates somewhere
+    a_torch = learner.act(obs, mask, explore=False)
+    sd = {k: v.numpy() for k, v in learner.net.state_dict().items()}
+    a_fixed = SafeDQNQ(sd, {"rule": "mvp-improve", "slack": 0.02}).act(
+        obs, mask, base=mvp_actions(obs, mask)
+    )
+    base = mvp_actions(obs, mask)
+    assert 0 < (a_torch != base).sum() < len(base)  # the test exercises both branches
+    assert (a_fixed == a_torch).mean() > 0.99  # float32 rounding of torch vs the fixed path
+    assert (mask[np.arange(len(a_fixed)), a_fixed] == 1).all()
+
+
+def test_the_networks_evaluate_mvp():
+    obs, mask = _states(64)
+    learner = SafeDQN(
+        SafeDQNConfig(obs_dim=obs.shape[1], width=16, rule="mvp-improve", slack=0.0),
+        gamma=0.9,
+        epsilon=lambda step: 0.0,
+        rng=np.random.default_rng(0),
+    )
+    learner.schedule(0, None)
+    # Behaviour without exploration is mvp itself, whatever the networks say.
+    np.testing.assert_array_equal(learner.act(obs, mask, explore=True), mvp_actions(obs, mask))
+    # Targets bootstrap with mvp's next action.
+    b = {
+        "next_obs": torch.from_numpy(obs),
+        "next_mask": torch.from_numpy(mask),
+        "done": torch.zeros(len(obs)),
+        "safety_reward": torch.zeros(len(obs)),
+        "goal_reward": torch.zeros(len(obs)),
+    }
+    y_s, y_g = learner.targets(b)
+    qs, qg = learner.target(b["next_obs"])
+    a = torch.from_numpy(mvp_actions(obs, mask))
+    idx = torch.arange(len(a))
+    torch.testing.assert_close(y_s, 0.9 * qs[idx, a].detach())
+    torch.testing.assert_close(y_g, 0.9 * qg[idx, a].detach())
+
+
+def _agent(checkpoint, monkeypatch=None):
+    spec = importlib.util.spec_from_file_location("mi", ROOT / "agents/mvp_improve/agent.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.Agent(None, None, checkpoint=str(checkpoint))
+
+
+@pytest.fixture(scope="module")
+def improve_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("improve") / "run"
+    r = cdr_bench(
+        "train", "safe-dqn-x", "--combine", "mvp-improve", "--run-dir", str(d),
+        "--total-steps", "400", "--n-envs", "4", "--no-curriculum", "--scenario", "high",
+        "--eval-episodes", "0", "--curve-every", "0", "--no-progress", "--width", "16",
+        "--learning-starts", "64", "--batch-size", "16", "--buffer-size", "2000",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_agent_plays_the_checkpoint_and_a_huge_margin_is_mvp(improve_run, tmp_path):
+    obs, mask = _states(200)
+    agent = _agent(improve_run / "checkpoint.pt")
+    a = agent.act_batch(obs, mask)
+    assert (mask[np.arange(len(a)), a] == 1).all()
+    (out,) = margin.with_slack(improve_run / "checkpoint.pt", tmp_path, [1e9])
+    assert torch.load(out, weights_only=True)["config"]["slack"] == 1e9
+    np.testing.assert_array_equal(_agent(out).act_batch(obs, mask), mvp_actions(obs, mask))
+
+
+def test_agent_errors(improve_run, tmp_path):
+    with pytest.raises(FileNotFoundError, match="none is shipped yet"):
+        _agent(tmp_path / "missing.pt")
+    ck = torch.load(improve_run / "checkpoint.pt", weights_only=True)
+    ck["config"]["rule"] = "sum"
+    torch.save(ck, tmp_path / "sum.pt")
+    with pytest.raises(ValueError, match="not trained with --combine mvp-improve"):
+        _agent(tmp_path / "sum.pt")
+    with pytest.raises(SystemExit, match="not trained with --combine mvp-improve"):
+        margin.with_slack(tmp_path / "sum.pt", tmp_path, [0.1])
