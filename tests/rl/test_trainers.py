@@ -111,6 +111,16 @@ def train_in_process(name: str, run_dir: Path, *flags: str) -> dict:
     return module.run(ns)
 
 
+def assert_same_run(a: Path, b: Path, steps: int) -> None:
+    """Runs ``a`` and ``b`` ended at the same step with the same weights and the same log."""
+    ca = torch.load(a / "checkpoint.pt", weights_only=True)
+    cb = torch.load(b / "checkpoint.pt", weights_only=True)
+    assert ca["meta"]["step"] == cb["meta"]["step"] >= steps
+    for k, v in ca["state_dict"].items():
+        assert torch.equal(v, cb["state_dict"][k]), k
+    assert json.dumps(log_lines(a)) == json.dumps(log_lines(b))
+
+
 def log_lines(run_dir: Path) -> list[dict]:
     rows = [json.loads(x) for x in (run_dir / "log.jsonl").read_text().splitlines()]
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows if "final" not in r]
@@ -135,12 +145,7 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch, name):
         stopped = train_in_process(name, b, "--total-steps", "300", *CURVE)
     assert 0 < stopped["step"] < 600
     train_in_process(name, b, *total, "--resume")
-    ca = torch.load(a / "checkpoint.pt", weights_only=True)
-    cb = torch.load(b / "checkpoint.pt", weights_only=True)
-    assert ca["meta"]["step"] == cb["meta"]["step"] >= 600
-    for k, v in ca["state_dict"].items():
-        assert torch.equal(v, cb["state_dict"][k]), k
-    assert json.dumps(log_lines(a)) == json.dumps(log_lines(b))
+    assert_same_run(a, b, 600)
 
 
 CURVE = ["--curve-every", "150", "--curve-episodes", "3"]
@@ -157,12 +162,7 @@ def test_stop_at_pauses_without_changing_the_run(tmp_path):
     assert 250 <= paused["step"] < 300
     assert torch.load(b / "state.pt", weights_only=False)["loop"]["step"] == paused["step"]
     train_in_process("rainbow", b, *total, "--resume")
-    ca = torch.load(a / "checkpoint.pt", weights_only=True)
-    cb = torch.load(b / "checkpoint.pt", weights_only=True)
-    assert ca["meta"]["step"] == cb["meta"]["step"] >= 600
-    for k, v in ca["state_dict"].items():
-        assert torch.equal(v, cb["state_dict"][k]), k
-    assert json.dumps(log_lines(a)) == json.dumps(log_lines(b))
+    assert_same_run(a, b, 600)
 
 
 @pytest.mark.slow
