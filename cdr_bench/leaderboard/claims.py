@@ -268,7 +268,8 @@ def build_claims(
         NOT_MEASURED, "-")  # fmt: skip
     add("fig7", "Fig. 7 trends (T, temperature, Polyak tau, critic size)", "§5.3.2, Fig. 7",
         "e.g. success 84.6 % at T = 8, 94.2 % at T = 10",
-        "the committed sensitivity run used 2,000 transitions per trial (noise)", NOT_MEASURED,
+        "the one-factor grid at 100k transitions per trial, three seeds (sweeps/sensitivity.yaml), "
+        "is still training (progress: sweeps/CAMPAIGN.md)", NOT_MEASURED,
         "-")  # fmt: skip
 
     # 14: latency order
