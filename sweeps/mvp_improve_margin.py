@@ -9,6 +9,11 @@ its bytes, so its identity, differ) and scores it and ``mvp`` on the same ``--ep
 ``high`` drawn from ``--seed`` (default 500000: not the leaderboard's episodes, which start at
 seed 0), then prints clean success, LoS and NMAC of each beside ``mvp``'s. Pick the margin here,
 then score the chosen copy on the leaderboard's episodes.
+
+    python sweeps/mvp_improve_margin.py --set 0.25 agents/mvp_improve/checkpoint.pt ...
+
+writes the chosen margin into shipped checkpoints in place (the networks are unchanged: the
+margin plays no part in training, whose behaviour is ``mvp`` and whose targets are ``mvp``'s).
 """
 
 from __future__ import annotations
@@ -23,21 +28,31 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def with_slack(checkpoint: Path, out_dir: Path, slacks: list[float]) -> list[Path]:
-    """Copies of ``checkpoint`` with each margin; returns their paths."""
+def _load(checkpoint: Path) -> dict:
     import torch
 
+    if not checkpoint.is_file():
+        raise SystemExit(f"{checkpoint}: no such checkpoint")
     ck = torch.load(checkpoint, map_location="cpu", weights_only=True)
     if ck["config"].get("rule") != "mvp-improve":
         raise SystemExit(f"{checkpoint}: not trained with --combine mvp-improve")
-    paths = []
-    for x in slacks:
-        path = out_dir / f"slack-{x:g}" / "checkpoint.pt"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        copy = {**ck, "config": {**ck["config"], "slack": float(x)}}
-        torch.save(copy, str(path) + ".tmp")
-        os.replace(str(path) + ".tmp", path)
-        paths.append(path)
+    return ck
+
+
+def _save(ck: dict, slack: float, path: Path) -> None:
+    import torch
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({**ck, "config": {**ck["config"], "slack": float(slack)}}, str(path) + ".tmp")
+    os.replace(str(path) + ".tmp", path)
+
+
+def with_slack(checkpoint: Path, out_dir: Path, slacks: list[float]) -> list[Path]:
+    """Copies of ``checkpoint`` with each margin; returns their paths."""
+    ck = _load(checkpoint)
+    paths = [out_dir / f"slack-{x:g}" / "checkpoint.pt" for x in slacks]
+    for x, path in zip(slacks, paths, strict=True):
+        _save(ck, x, path)
     return paths
 
 
@@ -56,17 +71,28 @@ def evaluate(agent: str, out: Path, episodes: int, seed: int, checkpoint: Path |
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("checkpoint", type=Path)
-    p.add_argument("--slack", type=float, nargs="+", required=True)
+    p.add_argument("checkpoint", type=Path, nargs="+")
+    p.add_argument("--slack", type=float, nargs="+", help="margins to compare")
+    p.add_argument("--set", type=float, help="write this margin into the checkpoints in place")
     p.add_argument("--episodes", type=int, default=500)
     p.add_argument("--seed", type=int, default=500_000)
     a = p.parse_args(argv)
-    if not a.checkpoint.is_file():
-        raise SystemExit(f"{a.checkpoint}: no such checkpoint")
-    folder = a.checkpoint.parent
+    if (a.slack is None) == (a.set is None):
+        p.error("give either --slack (compare margins) or --set (write one)")
+    if a.set is not None:
+        loaded = [(path, _load(path)) for path in a.checkpoint]  # all checked before any write
+        for path, ck in loaded:
+            _save(ck, a.set, path)
+            print(f"{path}: slack {a.set:g}")
+        return 0
+    if len(a.checkpoint) != 1:
+        p.error("--slack compares the margins of one checkpoint")
+    checkpoint = a.checkpoint[0]
+    _load(checkpoint)
+    folder = checkpoint.parent
     tag = f"high-{a.episodes}-seed{a.seed}.json"
     rows = [("mvp", evaluate("agents/mvp", folder / f"mvp-{tag}", a.episodes, a.seed, None))]
-    for x, path in zip(a.slack, with_slack(a.checkpoint, folder, a.slack), strict=True):
+    for x, path in zip(a.slack, with_slack(checkpoint, folder, a.slack), strict=True):
         m = evaluate("agents/mvp_improve", path.parent / tag, a.episodes, a.seed, path)
         rows.append((f"slack {x:g}", m))
     print(f"{'':12} clean success    LoS   NMAC   ({a.episodes} episodes of high, seed {a.seed})")

@@ -148,3 +148,24 @@ def test_agent_errors(improve_run, tmp_path):
         _agent(tmp_path / "sum.pt")
     with pytest.raises(SystemExit, match="not trained with --combine mvp-improve"):
         margin.with_slack(tmp_path / "sum.pt", tmp_path, [0.1])
+
+
+def test_margin_written_in_place_only_into_mvp_improve_checkpoints(improve_run, tmp_path, capsys):
+    import shutil
+
+    a, b = tmp_path / "a.pt", tmp_path / "b.pt"
+    shutil.copy(improve_run / "checkpoint.pt", a)
+    ck = torch.load(a, weights_only=True)
+    ck["config"]["rule"] = "sum"
+    torch.save(ck, b)
+    before = a.read_bytes()
+    with pytest.raises(SystemExit, match="b.pt: not trained with --combine mvp-improve"):
+        margin.main(["--set", "0.3", str(a), str(b)])
+    assert a.read_bytes() == before  # nothing written when one of them is wrong
+    assert margin.main(["--set", "0.3", str(a)]) == 0
+    new = torch.load(a, weights_only=True)
+    assert new["config"]["slack"] == 0.3
+    for k, v in torch.load(improve_run / "checkpoint.pt", weights_only=True)["state_dict"].items():
+        assert torch.equal(v, new["state_dict"][k])
+    with pytest.raises(SystemExit):
+        margin.main([str(a)])  # neither --slack nor --set
