@@ -35,9 +35,10 @@ class Agent:
         )
         if not os.path.isfile(self.checkpoint):
             raise FileNotFoundError(
-                f"no checkpoint at {self.checkpoint}: none is shipped yet "
-                "(agents/mvp_improve/README.md); train one with `cdr-bench train safe-dqn-x "
-                "--combine mvp-improve ...` and point CDR_BENCH_CHECKPOINT at its checkpoint.pt"
+                f"no checkpoint at {self.checkpoint}: the shipped one is agents/mvp_improve/"
+                "checkpoint.pt; train another with `cdr-bench train safe-dqn-x --combine "
+                "mvp-improve ...` (agents/mvp_improve/README.md) and point CDR_BENCH_CHECKPOINT "
+                "at its checkpoint.pt"
             )
         ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
         config = ck["config"]

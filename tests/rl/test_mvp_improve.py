@@ -139,7 +139,7 @@ def test_agent_plays_the_checkpoint_and_a_huge_margin_is_mvp(improve_run, tmp_pa
 
 
 def test_agent_errors(improve_run, tmp_path):
-    with pytest.raises(FileNotFoundError, match="none is shipped yet"):
+    with pytest.raises(FileNotFoundError, match="no checkpoint at .*missing.pt: the shipped one"):
         _agent(tmp_path / "missing.pt")
     ck = torch.load(improve_run / "checkpoint.pt", weights_only=True)
     ck["config"]["rule"] = "sum"
