@@ -17,17 +17,11 @@ from cdr_bench.rl.common import TrainArgs, training_env  # noqa: E402
 from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig, combine  # noqa: E402
 
 from .helpers import ROOT, cdr_bench  # noqa: E402
+from .test_safe_dqn import _q  # noqa: E402
 
 _spec = importlib.util.spec_from_file_location("margin", ROOT / "sweeps/mvp_improve_margin.py")
 margin = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(margin)
-
-
-def _q(*rows):
-    q = torch.full((len(rows), 27), -100.0)
-    for i, r in enumerate(rows):
-        q[i, : len(r)] = torch.tensor(r)
-    return q
 
 
 def test_rule_by_hand():
