@@ -23,15 +23,15 @@ TINY = [
 @pytest.mark.slow
 def test_replay_emptied_at_each_reset_and_the_run_finishes(tmp_path):
     run = tmp_path / "run"
-    flags = [str(run), "--resets", "200", "400", "--total-steps", "600", "--no-evaluate"]
+    flags = [str(run), "--resets", "250", "--total-steps", "500", "--no-evaluate"]
     assert rrr.main([*flags, *TINY]) == 0
     resets = json.loads((run / "resets.json").read_text())
-    assert len(resets) == 2 and 200 <= resets[0] < 250 and 400 <= resets[1] < 450
+    assert len(resets) == 1 and 250 <= resets[0] < 300
     state = torch.load(run / "state.pt", weights_only=False)
-    assert state["loop"]["step"] >= 600
-    # Since the last reset the replay holds only what was collected after it.
+    assert state["loop"]["step"] >= 500
+    # Since the reset the replay holds only what was collected after it.
     n = len(state["replay"]["buffer"]["data"]["action"])
-    assert 0 < n <= state["loop"]["step"] - resets[1] + 4
+    assert 0 < n <= state["loop"]["step"] - resets[0] + 4
     # Re-running a finished run trains nothing more and empties nothing more.
     before = (run / "checkpoint.pt").read_bytes()
     assert rrr.main([*flags, *TINY]) == 0
