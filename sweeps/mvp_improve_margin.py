@@ -64,7 +64,8 @@ def evaluate(agent: str, out: Path, episodes: int, seed: int, checkpoint: Path |
             env["CDR_BENCH_CHECKPOINT"] = str(checkpoint.resolve())
         cmd = [sys.executable, "-m", "cdr_bench", "evaluate", agent, "--scenario", "high"]
         cmd += ["--episodes", str(episodes), "--seed", str(seed), "--out", str(out.resolve())]
-        subprocess.run([*cmd, "--no-progress"], check=True, env=env, cwd=ROOT)
+        if subprocess.run([*cmd, "--no-progress"], env=env, cwd=ROOT).returncode:
+            raise SystemExit(f"scoring {agent} stopped with the error above")
     own = json.loads(out.read_text())["scenarios"][0]["metrics"]["ownship"]
     return {k: own[k]["value"] for k in ("clean_success_rate", "los_rate", "nmac_rate")}
 

@@ -77,7 +77,8 @@ def train(run: Path, seed: int, total: int, stop_at: int, extra: list[str]) -> N
     if (run / "state.pt").exists():
         cmd.append("--resume")
     print("+", " ".join(cmd[1:]), flush=True)
-    subprocess.run(cmd, check=True)
+    if subprocess.run(cmd).returncode != 0:
+        raise SystemExit(f"{run}: training stopped with the error above; fix it and re-run")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -106,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     env = dict(os.environ, CDR_BENCH_CHECKPOINT=str((run / "checkpoint.pt").resolve()))
     out = (run / "result.json").resolve()
     cmd = ["-m", "cdr_bench", "evaluate", "agents/rainbow", "--scenario", "high", "--out", str(out)]
-    subprocess.run([sys.executable, *cmd], check=True, env=env, cwd=Path(__file__).parents[1])
+    if subprocess.run([sys.executable, *cmd], env=env, cwd=Path(__file__).parents[1]).returncode:
+        raise SystemExit(f"{run}: scoring stopped with the error above")
     return 0
 
 

@@ -179,6 +179,8 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
     """Train, write ``args.run_dir``, return the summary (also its ``final`` log line)."""
     import torch
 
+    if args.stop_at < 0:
+        raise ValueError(f"--stop-at must be 0 (no pause) or a transition count: {args.stop_at}")
     torch.set_num_threads(args.threads)
 
     # Seeding.
