@@ -16,12 +16,10 @@ from cdr_bench.resolvers import mvp_actions  # noqa: E402
 from cdr_bench.rl.common import TrainArgs, training_env  # noqa: E402
 from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig, combine  # noqa: E402
 
-from .helpers import ROOT, cdr_bench  # noqa: E402
+from .helpers import ROOT, cdr_bench, sweep_script  # noqa: E402
 from .test_safe_dqn import _q  # noqa: E402
 
-_spec = importlib.util.spec_from_file_location("margin", ROOT / "sweeps/mvp_improve_margin.py")
-margin = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(margin)
+margin = sweep_script("mvp_improve_margin")
 
 
 def test_rule_by_hand():

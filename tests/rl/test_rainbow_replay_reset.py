@@ -1,18 +1,15 @@
 """sweeps/rainbow_replay_reset.py: the round-1 resume schedule (replay emptied at given
 transition counts) on a tiny budget, and continuing after an interruption."""
 
-import importlib.util
 import json
 
 import pytest
 
-from .helpers import ROOT
+from .helpers import sweep_script
 
 torch = pytest.importorskip("torch")
 
-spec = importlib.util.spec_from_file_location("rrr", ROOT / "sweeps" / "rainbow_replay_reset.py")
-rrr = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(rrr)
+rrr = sweep_script("rainbow_replay_reset")
 
 TINY = [
     "--n-envs", "4", "--log-every", "100", "--checkpoint-every", "200", "--width", "16",

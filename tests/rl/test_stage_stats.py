@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import sweep_script
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("stage_stats", ROOT / "sweeps" / "stage_stats.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return sweep_script("stage_stats")
 
 
 def test_windows_extremes_and_curve(tmp_path: Path) -> None:
