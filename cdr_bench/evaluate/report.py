@@ -337,6 +337,53 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     return head, rows, [ent[r["entry"]]["group"] for r in sd["rows"]]
 
 
+def study_value(metric: str, x: float | None, sd: float | None = None) -> str:
+    """A sensitivity-study number: a success rate in %, a reward as is; ``± sd`` if given."""
+    if x is None:
+        return "-"
+    if metric == "success_rate":
+        return f"{100 * x:.1f} %" + ("" if sd is None else f" ± {100 * sd:.1f}")
+    return f"{x:.2f}" + ("" if sd is None else f" ± {sd:.2f}")
+
+
+def sensitivity_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
+    """The sensitivity study (paper Fig. 7) beside the paper's numbers (``data["sensitivity"]``):
+    one row per factor and grid value."""
+    head = [
+        "factor",
+        "value",
+        "paper's pick",
+        "measured: mean ± sd over seeds",
+        "seeds",
+        "per seed",
+        "latency ms",
+        "paper (published)",
+    ]
+    rows: Rows = []
+    for fac in (data.get("sensitivity") or {}).get("factors", []):
+        m = fac["metric"]
+        for p in fac["points"]:
+            paper = p["paper"]
+            rows.append(
+                [
+                    Cell(f"{fac['name']} ({'success' if m == 'success_rate' else 'reward'})"),
+                    Cell(p["value"]),
+                    Cell("yes" if p["recommended"] else ""),
+                    Cell(study_value(m, p["mean"], p["sd"]), p["mean"]),
+                    Cell(str(len(p["values"])), len(p["values"])),
+                    Cell(", ".join(study_value(m, v) for v in p["values"]) or "-"),
+                    Cell("-" if p["latency_ms"] is None else f"{p['latency_ms']:.3g}"),
+                    Cell(
+                        "-"
+                        if paper is None
+                        else (f"{paper:g} %" if m == "success_rate" else f"{paper:g}"),
+                        paper,
+                    ),
+                ]
+            )
+    return head, rows
+
+
 def claims_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
     """The paper's claims beside our measurement and the verdict (``data["claims"]``)."""
     head = ["claim of the paper", "where", "published", "measured here", "verdict", "decided by"]

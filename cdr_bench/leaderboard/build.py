@@ -114,11 +114,12 @@ def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, byt
     """Every generated file (relative path -> bytes) from submissions and result files."""
     from cdr_bench.leaderboard.plots import matplotlib_version, render_plots
     from cdr_bench.leaderboard.render import render_html, render_markdown
+    from cdr_bench.leaderboard.sensitivity import load_study
 
     published = load_published(lb_dir)
     subs = load_submissions(lb_dir, published.names)
     entries = load_entries(subs, results_dir)
-    data = build_data(entries, published, reference)
+    data = build_data(entries, published, reference, load_study(lb_dir))
     plots = render_plots(data)
     files: dict[str, bytes] = {
         "README.md": render_markdown(data, published, list(plots)).encode(),

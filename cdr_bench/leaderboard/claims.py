@@ -18,6 +18,7 @@ Table 2 agents and the Table 3 variants. Rules, decided before looking at the nu
   significantly higher (the paired difference's interval above 0) at the budget both ran.
 * *Diffusion-AC is more multimodal than PPO*: held when its mean number of successful manoeuvre
   families per first decision (``cdr-bench multimodal``) is higher on every tactical family.
+* Fig. 7: one claim per factor, the rule of :mod:`cdr_bench.leaderboard.sensitivity`.
 * Latency: the paper's order (Diffusion-AC the slowest) against our medians per decision, which
   are measured on this CPU, not on the paper's GPU.
 """
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
+from cdr_bench.leaderboard.sensitivity import claim_rows as sensitivity_claims
 
 DIFFUSION = "Diffusion-AC"
 BASELINES = ("PPO", "TD3", "Safe-DQN-X", "Rainbow-DQN")
@@ -90,10 +92,12 @@ def build_claims(
     published: Any,
     multimodal: dict[tuple[str, str], float],
     latency: dict[str, float],
+    sensitivity: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """``by_row``: published row -> Entry; ``paired.metric(a, b, sid, metric)``: the paired
     difference b - a; ``multimodal``: (entry, scenario) -> mean successful families;
-    ``latency``: entry -> median ms per decision on :data:`SCENARIO`."""
+    ``latency``: entry -> median ms per decision on :data:`SCENARIO`; ``sensitivity``: the
+    Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it)."""
     out: list[dict[str, Any]] = []
 
     def add(cid: str, claim: str, source: str, published_text: str, measured: str,
@@ -266,11 +270,7 @@ def build_claims(
     add("dpsc-convergence", "DPSC reduces the convergence steps by about 14 %", "§1",
         "-14 %", "needs runs with and without DPSC to convergence over several seeds",
         NOT_MEASURED, "-")  # fmt: skip
-    add("fig7", "Fig. 7 trends (T, temperature, Polyak tau, critic size)", "§5.3.2, Fig. 7",
-        "e.g. success 84.6 % at T = 8, 94.2 % at T = 10",
-        "the one-factor grid at 100k transitions per trial, three seeds (sweeps/sensitivity.yaml), "
-        "is still training (progress: sweeps/CAMPAIGN.md)", NOT_MEASURED,
-        "-")  # fmt: skip
+    out.extend(sensitivity_claims(sensitivity))
 
     # 14: latency order
     if dac is not None and base and dac.name in latency:

@@ -653,11 +653,15 @@ def seed_aggregates(
 
 
 def build_data(
-    entries: list[Entry], published: Published, reference: str = DEFAULT_REFERENCE
+    entries: list[Entry],
+    published: Published,
+    reference: str = DEFAULT_REFERENCE,
+    sensitivity: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything the pages show, as one JSON-able dict (deterministic: no timestamps). The
     recorded trajectories are not in it (they are drawn by ``index.html`` from the replay
-    files); ``replays`` says which exist."""
+    files); ``replays`` says which exist. ``sensitivity``: the study of
+    :func:`cdr_bench.leaderboard.sensitivity.load_study` (None: no such section)."""
     by_name = {e.name: e for e in entries}
     ref = by_name.get(reference)
     if ref is None:
@@ -847,7 +851,9 @@ def build_data(
                 for e in entries
                 if CLAIMS_SCENARIO in e.result["timing"]["decision_latency"]
             },
+            sensitivity,
         ),
+        "sensitivity": sensitivity,
         "tables": tables,
         "tactical": tactical,
         "published_vs_measured": side_by_side,

@@ -362,6 +362,49 @@ def _heatmap(mm: dict[str, Any], title: str) -> bytes:
     return _png(fig)
 
 
+def _sensitivity(data: dict[str, Any]) -> bytes:
+    """Paper Fig. 7 beside ours: one panel per factor, our mean ± sd over seeds with the single
+    seeds as dots (left axis), the paper's stated numbers on the right axis (its scale differs:
+    another simulator), the values the paper recommends shaded."""
+    import matplotlib.pyplot as plt
+
+    facs = data["sensitivity"]["factors"]
+    fig, axes = plt.subplots(
+        1, len(facs), figsize=(3.3 * len(facs), 3.2), layout="constrained", squeeze=False
+    )
+    for ax, fac in zip(axes[0], facs, strict=True):
+        pts = fac["points"]
+        x = np.arange(len(pts))
+        scale = 100.0 if fac["metric"] == "success_rate" else 1.0
+        for xi, p in zip(x, pts, strict=True):
+            if p["recommended"]:
+                ax.axvspan(xi - 0.4, xi + 0.4, color="0.92", zorder=0)
+            if p["values"]:
+                ax.plot([xi] * len(p["values"]), [scale * v for v in p["values"]], ".",
+                        color=OKABE_ITO[4], alpha=0.45)  # fmt: skip
+        have = [(xi, p) for xi, p in zip(x, pts, strict=True) if p["mean"] is not None]
+        if have:
+            ax.errorbar([xi for xi, _ in have], [scale * p["mean"] for _, p in have],
+                        yerr=[scale * p["sd"] for _, p in have], marker="o", capsize=3,
+                        color=OKABE_ITO[4], label="measured (mean ± sd over seeds)")  # fmt: skip
+        twin = ax.twinx()
+        pub = [(xi, p["paper"]) for xi, p in zip(x, pts, strict=True) if p["paper"] is not None]
+        twin.plot([a for a, _ in pub], [b for _, b in pub], "s--", color=OKABE_ITO[5],
+                  label="paper (right axis)")  # fmt: skip
+        ax.set_xticks(x, [p["value"] for p in pts])
+        ax.set_xlabel(fac["name"], fontsize=8)
+        word = "success rate (%)" if fac["metric"] == "success_rate" else "episode reward"
+        ax.set_ylabel(f"measured {word}", fontsize=8)
+        twin.set_ylabel(f"paper {word}", fontsize=8, color=OKABE_ITO[5])
+        ax.tick_params(labelsize=7)
+        twin.tick_params(labelsize=7, colors=OKABE_ITO[5])
+    h1, l1 = axes[0][0].get_legend_handles_labels()
+    h2, l2 = axes[0][0].figure.axes[-1].get_legend_handles_labels()
+    fig.legend(h1 + h2, l1 + l2, loc="outside lower center", ncols=2, fontsize=8, frameon=False)
+    fig.suptitle("Sensitivity (paper Fig. 7); shaded: the paper's recommended values", fontsize=9)
+    return _png(fig)
+
+
 def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
     """``file name -> PNG bytes`` of every plot (names are stable: they are linked), the
     headline plots first."""
@@ -410,6 +453,8 @@ def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
                 )
             out["success_vs_density.png"] = _success_vs_density(data, dens)
             out["latency.png"] = _latency(data, dens)
+        if (data.get("sensitivity") or {}).get("factors"):
+            out["sensitivity.png"] = _sensitivity(data)
         names = {e["name"]: e["display_name"] for e in data["entries"]}
         for mm in data["multimodality"]:
             fname = f"multimodal-{mm['entry']}-{mm['scenario'].replace('/', '_')}.png"

@@ -35,6 +35,7 @@ from cdr_bench.evaluate.report import (
     ranking_table,
     scenario_table,
     seeds_table,
+    sensitivity_table,
     side_by_side_tables,
     tactical_table,
 )
@@ -120,6 +121,25 @@ def _seeds_note(data: dict[str, Any]) -> str:
         reps=sd["resamples"],
         ntasks=len(sd["tasks"]),
         tasks=", ".join(f"`{t}`" for t in sd["tasks"]),
+    )
+
+
+def sensitivity_note(data: dict[str, Any]) -> str:
+    """What the sensitivity table shows and where its trials come from."""
+    st = data["sensitivity"]
+    scen = ", ".join(f"`{s}` ({n} episodes)" for s, n in st["scenarios"])
+    return (
+        f"Diffusion-AC trained once per grid value and seed, one factor varied at a time around "
+        f"the defaults ({st['trials']} trials landed, in `{st['source']}` relative to this "
+        f"folder; `sweeps/sensitivity.yaml`). Each trial's number is the mean over {scen} of "
+        "the ownship's success rate (the episode reward for the Polyak coefficient, as the "
+        "paper plots it). The temperature is held fixed over training and is in units of the "
+        "per-state standard deviation of Q (the trainer's `--tau-relative`), the paper's in "
+        "units of Q, so only its trend compares. The paper's numbers are those its text "
+        "states (`published/fig7.yaml`; its own simulator, five runs per value). Each "
+        "factor's verdict is in the claims table; "
+        f"a factor is judged once every value has {st['min_seeds']} seeds. Plot: "
+        "`plots/sensitivity.png`."
     )
 
 
@@ -277,6 +297,10 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
     out += ["## Seeds", "", _seeds_note(data), "", md_table(head, rows, numeric_from=2), ""]
     head, rows = claims_table(data)
     out += ["## Claims of the paper", "", CLAIMS_NOTE, "", md_table(head, rows, numeric_from=9), ""]
+    if data.get("sensitivity"):
+        head, rows = sensitivity_table(data)
+        out += ["## Sensitivity (paper Fig. 7)", "", sensitivity_note(data), "",
+                md_table(head, rows, numeric_from=3, text_from=5), ""]  # fmt: skip
     if data["tactical"]:
         head, rows, _ = tactical_table(data)
         out += ["## Tactical scenarios", "", TACTICAL_NOTE, "", md_table(head, rows), ""]
@@ -634,7 +658,7 @@ def render_html(
         f'<div id="filter"><strong>Show:</strong> {filt}</div>',
         "<h1>cdr-bench leaderboard</h1>",
         '<nav><a href="#ranking">Ranking</a><a href="#seeds">Seeds</a><a href="#claims">Claims</a>'
-        '<a href="#tactical">Tactical</a>'
+        '<a href="#sensitivity">Sensitivity</a><a href="#tactical">Tactical</a>'
         '<a href="#replays">Replays</a><a href="#measured">Per scenario</a>'
         '<a href="#plots">Plots</a><a href="#entries">Entries</a>'
         '<a href="#published">Published (paper)</a><a href="#side-by-side">Published vs '
@@ -669,6 +693,13 @@ def render_html(
         f'<p class="note">{inline_md(CLAIMS_NOTE)}</p>',
         html_table("table-claims", head, rows),
     ]
+    if data.get("sensitivity"):
+        head, rows = sensitivity_table(data)
+        b += [
+            '<h2 id="sensitivity">Sensitivity (paper Fig. 7)</h2>',
+            f'<p class="note">{inline_md(sensitivity_note(data))}</p>',
+            html_table("table-sensitivity", head, rows),
+        ]
     if data["tactical"]:
         head, rows, groups = tactical_table(data)
         b += [

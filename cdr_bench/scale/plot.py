@@ -10,66 +10,12 @@ of the one-factor-at-a-time design) is drawn in every column at the default valu
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cdr_bench.errors import UserError
-
-METRICS: tuple[tuple[str, str], ...] = (
-    ("success", "success rate"),
-    ("nmac", "NMAC rate"),
-    ("latency_ms", "decision latency (ms, median)"),
-    ("reward", "episode reward"),
-)
-
-
-def trial_metrics(result: dict[str, Any]) -> dict[str, float]:
-    """The four plotted numbers of one result file (mean over its scenarios)."""
-    rows: dict[str, list[float]] = {k: [] for k, _ in METRICS}
-    for s in result["scenarios"]:
-        own = s["metrics"]["ownship"]
-        rows["success"].append(own["success_rate"]["value"])
-        rows["nmac"].append(own["nmac_rate"]["value"])
-        rows["reward"].append(own["goal_reward"]["value"] + own["safety_reward"]["value"])
-        lat = result.get("timing", {}).get("decision_latency", {}).get(s["id"], {})
-        rows["latency_ms"].append(lat.get("per_decision_ms", {}).get("median", math.nan))
-    return {k: float(np.mean(v)) for k, v in rows.items()}
-
-
-def _sort_key(label: str) -> tuple[int, float, str]:
-    try:
-        return (1, float(label), label)
-    except ValueError:
-        return (0, 0.0, label)
-
-
-def collect(sweep_dir: Path) -> dict[str, Any]:
-    """``{factor: {label: {metric: [per-seed values]}}}`` plus the default labels."""
-    trials = []
-    for tj in sorted(sweep_dir.glob("*/trial.json")):
-        rec = json.loads(tj.read_text())
-        res = json.loads((tj.parent / rec["result"]).read_text())
-        trials.append((rec, trial_metrics(res)))
-    if not trials:
-        raise UserError(f"{sweep_dir}: no finished trials (*/trial.json)")
-    # the centre point's value of each factor: the flags its "default" trials were trained with
-    fixed: dict[str, Any] = next(
-        (r["train_flags"] for r, _ in trials if r["factor"] == "default"), {}
-    )
-    factors = sorted({r["factor"] for r, _ in trials if r["factor"] != "default"}) or ["default"]
-    data: dict[str, dict[str, dict[str, list[float]]]] = {f: {} for f in factors}
-    defaults = {f: str(fixed[f]) if f in fixed else "default" for f in factors}
-    for rec, m in trials:
-        targets = factors if rec["factor"] == "default" else [rec["factor"]]
-        for f in targets:
-            label = defaults[f] if rec["factor"] == "default" else rec["label"]
-            cell = data[f].setdefault(label, {k: [] for k, _ in METRICS})
-            for k, _ in METRICS:
-                cell[k].append(m[k])
-    return {"factors": data, "defaults": defaults, "trials": len(trials)}
+from cdr_bench.leaderboard.sensitivity import METRICS, collect, sort_key
 
 
 def plot_sweep(sweep_dir: Path, out: Path, json_out: Path | None = None) -> dict[str, Any]:
@@ -87,7 +33,7 @@ def plot_sweep(sweep_dir: Path, out: Path, json_out: Path | None = None) -> dict
     )
     for j, f in enumerate(factors):
         cells = data["factors"][f]
-        labels = sorted(cells, key=_sort_key)
+        labels = sorted(cells, key=sort_key)
         x = np.arange(len(labels))
         for i, (k, title) in enumerate(METRICS):
             ax = axes[i][j]
