@@ -162,6 +162,11 @@ def train(algorithm: str, args: Args) -> dict:
         model.action_space.np_random.bit_generator.state = saved["action_space_rng"]
     else:
         model = _new_model(algorithm, args, venv)
+    # an in-memory logger (read by read_losses): SB3's default leaves an empty /tmp/SB3-<time>
+    # folder behind every run
+    from stable_baselines3.common.logger import Logger
+
+    model.set_logger(Logger(None, []))
     log = RunLog(args, algorithm, saved["log"])
     if args.teacher and not args.resume:
         if td3:
