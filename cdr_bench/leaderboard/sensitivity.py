@@ -198,7 +198,7 @@ def study_data(collected: dict[str, Any], fig7: dict[str, Any], source: str) -> 
         for lb in sorted(labels, key=sort_key):
             cell = ours.get(lb, {})
             vals = [float(x) for x in cell.get(key, [])]
-            lat = [float(x) for x in cell.get("latency_ms", [])]
+            lat = [float(x) for x in cell.get("latency_ms", []) if math.isfinite(x)]
             paper = next((float(pv) for pk, pv in spec["values"].items() if _same(lb, pk)), None)
             points.append(
                 {
@@ -207,7 +207,7 @@ def study_data(collected: dict[str, Any], fig7: dict[str, Any], source: str) -> 
                     "values": [_r(x) for x in vals],
                     "mean": _r(float(np.mean(vals))) if vals else None,
                     "sd": _r(float(np.std(vals))) if vals else None,
-                    "latency_ms": _r(float(np.nanmean(lat))) if lat else None,
+                    "latency_ms": _r(float(np.mean(lat))) if lat else None,
                     "recommended": any(_same(lb, v) for v in spec["recommended"]),
                     "paper": paper,
                 }
