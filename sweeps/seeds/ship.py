@@ -19,12 +19,14 @@ only with a re-scoring): it copies the finished trials, each as the sweep wrote 
 result.json/.jsonl, checkpoint.pt, log.jsonl, args.json), to ``sweeps/landed/<sweep>/<key>/`` so
 that a finished seed is committed as it lands. That folder is a sweep output folder: copied back
 to ``runs/sweeps/<sweep>/``, ``cdr-bench sweep ... --resume`` skips those trials. Shipping the
-sweep later removes the staged copy (one copy of each checkpoint).
+sweep later removes the staged copy (one copy of each checkpoint); trials whose checkpoint is
+already shipped into an agent folder are not staged again.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import shutil
@@ -44,13 +46,27 @@ def _copy(src: Path, dst: Path) -> None:
 STAGED = ("trial.json", "result.json", "result.jsonl", "checkpoint.pt", "log.jsonl", "args.json")
 
 
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def shipped_checkpoints() -> dict[str, Path]:
+    """sha256 -> path of every checkpoint already shipped into an agent folder."""
+    return {_digest(p): p for p in sorted((ROOT / "agents").rglob("*.pt"))}
+
+
 def stage(sweep_dir: Path) -> int:
     dest = ROOT / "sweeps" / "landed" / sweep_dir.resolve().name
     n = 0
+    shipped = shipped_checkpoints()
     for trial in sorted(sweep_dir.glob("*/trial.json")):
         d = trial.parent
         if not all((d / f).is_file() for f in STAGED):
             print(f"skip {d.name}: not finished")
+            continue
+        where = shipped.get(_digest(d / "checkpoint.pt"))
+        if where is not None:  # one copy of each checkpoint: the agent folder's
+            print(f"skip {d.name}: already shipped as {where.relative_to(ROOT)}")
             continue
         for f in STAGED:
             _copy(d / f, dest / d.name / f)
