@@ -356,7 +356,6 @@ def sensitivity_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
         "measured: mean ± sd over seeds",
         "seeds",
         "per seed",
-        "latency ms",
         "paper (published)",
     ]
     rows: Rows = []
@@ -372,7 +371,6 @@ def sensitivity_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
                     Cell(study_value(m, p["mean"], p["sd"]), p["mean"]),
                     Cell(str(len(p["values"])), len(p["values"])),
                     Cell(", ".join(study_value(m, v) for v in p["values"]) or "-"),
-                    Cell("-" if p["latency_ms"] is None else f"{p['latency_ms']:.3g}"),
                     Cell(
                         "-"
                         if paper is None

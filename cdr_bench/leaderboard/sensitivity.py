@@ -185,7 +185,8 @@ def study_data(collected: dict[str, Any], fig7: dict[str, Any], source: str) -> 
     """The leaderboard's ``sensitivity`` section: per factor of the paper's Fig. 7, every grid
     value (ours or the paper's) with our per-seed values, mean and standard deviation, and the
     paper's number; non-numeric labels (the temperature column's annealed "default") are left
-    out: they are no point of the paper's grid."""
+    out: they are no point of the paper's grid. The trials' decision latencies are not shown:
+    each was measured while other trials shared the CPU, so they do not compare."""
     factors = []
     for f, spec in fig7["factors"].items():
         ours = collected["factors"].get(f, {})
@@ -198,7 +199,6 @@ def study_data(collected: dict[str, Any], fig7: dict[str, Any], source: str) -> 
         for lb in sorted(labels, key=sort_key):
             cell = ours.get(lb, {})
             vals = [float(x) for x in cell.get(key, [])]
-            lat = [float(x) for x in cell.get("latency_ms", []) if math.isfinite(x)]
             paper = next((float(pv) for pk, pv in spec["values"].items() if _same(lb, pk)), None)
             points.append(
                 {
@@ -207,7 +207,6 @@ def study_data(collected: dict[str, Any], fig7: dict[str, Any], source: str) -> 
                     "values": [_r(x) for x in vals],
                     "mean": _r(float(np.mean(vals))) if vals else None,
                     "sd": _r(float(np.std(vals))) if vals else None,
-                    "latency_ms": _r(float(np.mean(lat))) if lat else None,
                     "recommended": any(_same(lb, v) for v in spec["recommended"]),
                     "paper": paper,
                 }
