@@ -51,6 +51,10 @@ from cdr_bench.scale.config import Sweep, Trial
 
 TRIAL_FILE = "trial.json"
 RESULT_FILE = "result.json"
+TRIAL_LOCK = ".lock"
+"""``<out>/.work/<key>.lock``: held by the sweep process running the trial."""
+ELSEWHERE = "running_elsewhere"
+"""Key of what :func:`run_trial` returns for a trial another live process is running."""
 
 
 def trial_done(out: Path, trial: Trial) -> bool:
@@ -68,15 +72,49 @@ def run_trial(trial: Trial, out: str) -> dict[str, Any]:
     """Train, evaluate and publish one trial (the body of the Ray task; also callable
     directly). Returns the ``trial.json`` record. Raises ``RuntimeError`` when a step fails."""
 
+    import fcntl
+
     root = Path(out)
     final = root / trial.key
     if (final / TRIAL_FILE).is_file():  # an earlier attempt landed already
         return json.loads((final / TRIAL_FILE).read_text())
-    work, lock, resumed = _claim_attempt(root, trial.key)
+    # One live attempt per trial: another sweep process in the same output folder (one per
+    # core) that is running this trial holds its lock; this process leaves the trial to it.
+    (root / ".work").mkdir(parents=True, exist_ok=True)
+    owner = os.open(root / ".work" / f"{trial.key}{TRIAL_LOCK}", os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        return _run_attempt(trial, root, final, work, resumed)
+        try:
+            fcntl.flock(owner, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return {"key": trial.key, ELSEWHERE: True}
+        if (final / TRIAL_FILE).is_file():  # landed while this process waited for the lock
+            return json.loads((final / TRIAL_FILE).read_text())
+        if _live_attempt(root, trial.key):  # e.g. a sweep process of an earlier version
+            return {"key": trial.key, ELSEWHERE: True}
+        work, lock, resumed = _claim_attempt(root, trial.key)
+        try:
+            return _run_attempt(trial, root, final, work, resumed)
+        finally:
+            os.close(lock)
     finally:
-        os.close(lock)
+        os.close(owner)
+
+
+def _live_attempt(root: Path, key: str) -> bool:
+    """Whether a live process holds the lock of one of the trial's work folders."""
+    import fcntl
+
+    for d in (root / ".work").glob(f"{key}-*"):
+        if not (d / ".lock").is_file():
+            continue
+        fd = os.open(d / ".lock", os.O_RDWR)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return True
+        finally:
+            os.close(fd)  # closing releases a lock this process took
+    return False
 
 
 def _claim_attempt(root: Path, key: str) -> tuple[Path, int, str]:
@@ -115,6 +153,16 @@ def remove_idle_work(out: Path) -> None:
     if not work.is_dir():
         return
     for d in work.iterdir():
+        if d.name.endswith(TRIAL_LOCK):  # a trial's lock: removed unless a live attempt holds it
+            fd = os.open(d, os.O_RDWR)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                d.unlink()
+            except OSError:
+                pass
+            finally:
+                os.close(fd)
+            continue
         lock = d / ".lock"
         if lock.is_file():
             fd = os.open(lock, os.O_RDWR)
@@ -310,6 +358,13 @@ def _run_on_ray(
             n += 1
             try:
                 rec = ray.get(ready[0])
+                if rec.get(ELSEWHERE):
+                    say(
+                        f"[{n}/{len(todo)}] {t.key} {t.factor} {t.label} seed {t.seed}: running "
+                        "in another sweep process, left to it",
+                        file=sys.stderr,
+                    )
+                    continue
                 say(
                     f"[{n}/{len(todo)}] {t.key} {t.factor} {t.label} seed {t.seed}: done "
                     f"in {rec['wall_s']} s on {rec['host']}",

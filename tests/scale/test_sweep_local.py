@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,7 @@ from cdr_bench.errors import UserError  # noqa: E402
 from cdr_bench.evaluate.api import evaluate, resolve_jobs  # noqa: E402
 from cdr_bench.scale.config import load_sweep  # noqa: E402
 from cdr_bench.scale.plot import plot_sweep  # noqa: E402
-from cdr_bench.scale.sweep import RESULT_FILE, TRIAL_FILE, run_sweep  # noqa: E402
+from cdr_bench.scale.sweep import ELSEWHERE, RESULT_FILE, TRIAL_FILE, run_sweep  # noqa: E402
 
 from .helpers import REPO, tiny_sweep  # noqa: E402
 
@@ -127,13 +128,15 @@ def test_a_dead_attempt_is_resumed_not_restarted(tmp_path):
     (live / "state.pt").write_bytes(b"x")
     fd = os.open(live / ".lock", os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX)
-    try:
-        rec = run_trial(trial, str(out))
+    try:  # while another process runs the trial, this one leaves it alone
+        assert run_trial(trial, str(out)) == {"key": trial.key, ELSEWHERE: True}
     finally:
         os.close(fd)
+    assert (live / "state.pt").read_bytes() == b"x"  # untouched
+    shutil.rmtree(live)  # that process ended without a state worth resuming
+    rec = run_trial(trial, str(out))
     assert rec["resumed"] == "train" and rec["attempt"] == dead.name
     rows = [json.loads(x) for x in (out / trial.key / "log.jsonl").read_text().splitlines()]
     steps = [r["step"] for r in rows if "step" in r]
     assert steps == sorted(steps) and 999999 not in steps and len(set(steps)) == len(steps)
     assert rows[-1]["final"]["step"] >= 120 and steps[0] <= 60 < steps[-1]
-    assert (live / "state.pt").read_bytes() == b"x"  # untouched

@@ -114,7 +114,7 @@ def _wait_work_dirs(out: Path, n: int, driver: subprocess.Popen, timeout_s: floa
     deadline = time.time() + timeout_s
     while time.time() < deadline:
         work = out / ".work"
-        if work.is_dir() and len(list(work.iterdir())) >= n:
+        if work.is_dir() and len([p for p in work.iterdir() if p.is_dir()]) >= n:
             return
         if driver.poll() is not None:
             break
@@ -152,7 +152,7 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
     _wait_nodes(address, 2)
     _wait_work_dirs(out, 2, driver)  # both nodes (1 CPU each) busy: the worker dies mid-trial
     time.sleep(1)
-    running = {p.name for p in (out / ".work").iterdir()}
+    running = {p.name for p in (out / ".work").iterdir() if p.is_dir()}  # not the trial locks
     _kill(nodes["worker"])
     stdout, _ = driver.communicate(timeout=240)
     assert driver.returncode == 0, stdout
