@@ -81,12 +81,14 @@ def run_trial(trial: Trial, out: str) -> dict[str, Any]:
     # One live attempt per trial: another sweep process in the same output folder (one per
     # core) that is running this trial holds its lock; this process leaves the trial to it.
     (root / ".work").mkdir(parents=True, exist_ok=True)
-    owner = os.open(root / ".work" / f"{trial.key}{TRIAL_LOCK}", os.O_RDWR | os.O_CREAT, 0o644)
+    lock_path = root / ".work" / f"{trial.key}{TRIAL_LOCK}"
+    owner = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        try:
-            fcntl.flock(owner, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            return {"key": trial.key, ELSEWHERE: True}
+        fcntl.flock(owner, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(owner)
+        return {"key": trial.key, ELSEWHERE: True}
+    try:
         if (final / TRIAL_FILE).is_file():  # landed while this process waited for the lock
             return json.loads((final / TRIAL_FILE).read_text())
         if _live_attempt(root, trial.key):  # e.g. a sweep process of an earlier version
@@ -97,6 +99,8 @@ def run_trial(trial: Trial, out: str) -> dict[str, Any]:
         finally:
             os.close(lock)
     finally:
+        with contextlib.suppress(OSError):  # still held: no other process is using the file
+            lock_path.unlink()
         os.close(owner)
 
 
