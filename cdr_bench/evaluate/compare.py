@@ -10,6 +10,7 @@ per-episode sums (so learning intruders are resampled as whole episodes).
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Any
@@ -55,16 +56,31 @@ _METRICS: dict[str, tuple[Any, Any]] = {
 def _sums(
     episodes: list[dict[str, Any]], role: str, names: list[str]
 ) -> dict[str, NDArray[np.float64]]:
+    mine = [[ac for ac in ep["aircraft"] if role_of(ac["id"]) == role] for ep in episodes]
     out = {}
     for name in names:
         num, den = _METRICS[name]
         nd = np.zeros((len(episodes), 2))
-        for i, ep in enumerate(episodes):
-            for ac in ep["aircraft"]:
-                if role_of(ac["id"]) == role:
-                    nd[i, 0] += float(num(ac))
-                    nd[i, 1] += float(den(ac))
+        for i, acs in enumerate(mine):
+            for ac in acs:
+                nd[i, 0] += float(num(ac))
+                nd[i, 1] += float(den(ac))
         out[name] = nd
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def _indices(sizes: tuple[int, ...]) -> list[NDArray[np.int64]]:
+    """The resampled positions of each compared scenario, drawn in turn from one generator
+    seeded with ``BOOTSTRAP_SEED`` (so a scenario's draw depends on the sizes before it); the
+    same for every pair of results on those scenarios, so drawn once (a leaderboard build
+    compares each entry with many others)."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    out = []
+    for n in sizes:
+        idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
+        idx.flags.writeable = False
+        out.append(idx)
     return out
 
 
@@ -72,7 +88,10 @@ def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any
     if idx is None:
         d = nd[:, 1].sum()
         return nd[:, 0].sum() / d if d > 0 else np.nan
-    num, den = nd[idx, 0].sum(axis=-1), nd[idx, 1].sum(axis=-1)
+    # gathered from a contiguous column: the same (resamples, n) array as nd[idx, 0], faster,
+    # so the same sums
+    num = np.ascontiguousarray(nd[:, 0])[idx].sum(axis=-1)
+    den = np.ascontiguousarray(nd[:, 1])[idx].sum(axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
 
@@ -141,15 +160,16 @@ def compare(
                     f"({sa[sid][key]} vs {sb[sid][key]}); run both with the same scenario "
                     "version, --episodes and --seed"
                 )
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    rows = []
+    pairs = {}
     for sid in sa:
         xa = [e for e in ea if e["scenario"] == sid]
         xb = [e for e in eb if e["scenario"] == sid]
         if [e["seed"] for e in xa] != [e["seed"] for e in xb]:
             raise UserError(f"not the same episodes: per-episode seeds of {sid} differ")
-        n = len(xa)
-        idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
+        pairs[sid] = (xa, xb)
+    rows = []
+    draws = _indices(tuple(len(xa) for xa, _ in pairs.values()))
+    for (sid, (xa, xb)), idx in zip(pairs.items(), draws, strict=True):
         for role in sa[sid]["metrics"]:
             if role not in sb[sid]["metrics"]:
                 continue

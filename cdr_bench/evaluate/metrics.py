@@ -32,6 +32,7 @@ so deterministic) for means. For learning intruders every aircraft-episode count
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -77,10 +78,22 @@ def bootstrap_mean_interval(
         return (math.nan, math.nan)
     if x.size == 1:
         return (float(x[0]), float(x[0]))
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, (resamples, x.size))].mean(axis=1)
+    means = x[resample_indices(x.size, resamples, seed)].mean(axis=1)
     lo, hi = np.percentile(means, [2.5, 97.5])
     return (float(lo), float(hi))
+
+
+@functools.lru_cache(maxsize=8)
+def resample_indices(
+    n: int, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> NDArray[np.int64]:
+    """The bootstrap's resampled positions, ``(resamples, n)``: the first draw of
+    ``default_rng(seed).integers(0, n, ...)``, the same for every sample of size ``n``, so it is
+    drawn once per size (read-only) and every interval is unchanged. Drawing it was 3/4 of the
+    time of an interval, and a leaderboard build computes thousands of them."""
+    idx = np.random.default_rng(seed).integers(0, n, (resamples, n))
+    idx.flags.writeable = False
+    return idx
 
 
 def _r(x: float) -> float | None:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
+from cdr_bench.evaluate.metrics import resample_indices, role_of
 from cdr_bench.leaderboard.sensitivity import claim_rows as sensitivity_claims
 
 DIFFUSION = "Diffusion-AC"
@@ -77,8 +77,7 @@ def _nmac_reduction(a: Any, b: Any) -> tuple[float | None, list[float] | None]:
     fa, fb = flags(a), flags(b)
     if fa.size != fb.size or fb.sum() == 0:
         return None, None
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    idx = rng.integers(0, fa.size, (BOOTSTRAP_RESAMPLES, fa.size))
+    idx = resample_indices(fa.size)
     na, nb = fa[idx].sum(axis=1), fb[idx].sum(axis=1)
     keep = nb > 0
     r = 1.0 - na[keep] / nb[keep]
