@@ -54,7 +54,7 @@ def test_every_trainer_is_tested():
 @pytest.mark.parametrize("name", list(AGENT_DIR))
 def test_tiny_training_run_and_agent(tmp_path, name):
     d = tmp_path / "run"
-    flags = [*TINY, *EXTRA[name]]
+    flags = [*TINY, *EXTRA[name], "--curve-episodes", "10"]  # the default 100: args.json
     r = cdr_bench("train", name, "--run-dir", str(d), "--total-steps", "256", *flags)
     assert r.returncode == 0, r.stderr
     first = summary(r.stdout)
@@ -70,9 +70,13 @@ def test_tiny_training_run_and_agent(tmp_path, name):
     prefixes = {k.split("/")[0] for x in lines for k in x if "/" in k}
     assert prefixes <= {"charts", "losses", "curriculum", "curve"}
     # By default the learning curve starts with the initial policy (every 50,000 transitions).
-    assert [x["curve/episodes"] for x in lines if "curve/success" in x] == [100]
+    assert [x["curve/episodes"] for x in lines if "curve/success" in x] == [10]
     assert any(k.startswith("losses/") for x in lines for k in x)
-    assert json.loads((d / "args.json").read_text())["algorithm"] == name
+    args = json.loads((d / "args.json").read_text())
+    assert args["algorithm"] == name and args["curve_every"] == 50_000
+    p = argparse.ArgumentParser()
+    importlib.import_module(TRAINERS[name]).add_arguments(p, name)
+    assert p.parse_args(["--run-dir", str(d)]).curve_episodes == 100  # the default
     meta = torch.load(d / "checkpoint.pt", weights_only=True)["meta"]
     assert meta["step"] >= 512 and meta["algorithm"] == name
 
