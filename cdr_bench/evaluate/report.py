@@ -509,11 +509,11 @@ def published_table(
 def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], Rows]]:
     names = {e["name"]: e["display_name"] for e in data["entries"]}
     kinds = {c.key: c.kind for c in COLUMNS}
-    by_entry: dict[str, list[dict[str, Any]]] = {}
+    by_entry: dict[tuple[str, str], list[dict[str, Any]]] = {}  # (entry, paper row): blocks
     for block in data["published_vs_measured"]:
-        by_entry.setdefault(block["entry"], []).append(block)
+        by_entry.setdefault((block["entry"], block["published_as"]), []).append(block)
     out = []
-    for entry, blocks in by_entry.items():
+    for (entry, _), blocks in by_entry.items():
         head = ["metric"]
         for b in blocks:
             head += [f"{b['scenario']} published", f"{b['scenario']} measured here"]

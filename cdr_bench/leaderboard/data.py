@@ -57,7 +57,7 @@ from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
-DATA_VERSION = 4
+DATA_VERSION = 5
 HEADLINE_SCENARIO = "high"
 HEADLINE_METRIC = "clean_success_rate"
 TIE_BREAK = "extra_path_km"
@@ -763,11 +763,9 @@ def build_data(
     ]
 
     side_by_side = []
-    for e in entries:
-        if e.sub.published_as is None:
-            continue
+    for e, row in ((x, row) for x in entries for row in x.sub.published_as):
         for sid in DENSITIES:
-            pub = published.lookup(e.sub.published_as, sid)
+            pub = published.lookup(row, sid)
             s = e.scenario(sid)
             if pub is None or s is None:
                 continue
@@ -775,7 +773,7 @@ def build_data(
             side_by_side.append(
                 {
                     "entry": e.name,
-                    "published_as": e.sub.published_as,
+                    "published_as": row,
                     "table": pub.table,
                     "scenario": sid,
                     "rows": [
@@ -817,7 +815,7 @@ def build_data(
                 "training": e.sub.training,
                 "training_logs": list(e.sub.training_logs),
                 "budget": info[e.name][0],
-                "published_as": e.sub.published_as,
+                "published_as": list(e.sub.published_as),
                 "agent_sha256": e.result["agent"]["sha256"],
                 "result_file": f"results/{e.path.name}",
                 "base_seed": e.result["base_seed"],
@@ -835,7 +833,7 @@ def build_data(
             fixed_of,
         ),
         "claims": build_claims(
-            {e.sub.published_as: e for e in entries if e.sub.published_as},
+            {row: e for e in entries for row in e.sub.published_as},
             paired,
             published,
             {

@@ -102,8 +102,10 @@ class Submission:
     """Scenario registry names, in run order."""
     suite: str | None
     """The named suite when ``scenarios`` was given as one (``paper``)."""
-    published_as: str | None
-    """Row of the paper's Table 2 (agent) or Table 3 (variant) this entry reproduces."""
+    published_as: tuple[str, ...]
+    """Rows of the paper's Table 2 (agent) or Table 3 (variant) this entry reproduces (one
+    entry may stand for two: the reference-budget Diffusion-AC is both Table 2's
+    "Diffusion-AC" and Table 3's "Diffusion-AC (Complete)"); empty for none."""
     multimodality: tuple[str, ...]
     """Scenarios for ``cdr-bench multimodal`` (first-action distributions)."""
     group: str = "scripted"
@@ -134,7 +136,7 @@ class Submission:
                 training_logs=(s.training_log,),
                 multimodality=(),
                 replays=(),
-                published_as=None,
+                published_as=(),
                 budget=None,
                 seeds=(),
             )
@@ -225,7 +227,8 @@ FIELDS: dict[str, tuple[bool, str]] = {
     "scenarios": (True, "'paper' (the paper suite) or a list of scenario registry names"),
     "published_as": (
         False,
-        "row of the paper's Table 2 (agent) or Table 3 (variant) shown beside this entry",
+        "row of the paper's Table 2 (agent) or Table 3 (variant) shown beside this entry, or a "
+        "list of such rows",
     ),
     "multimodality": (
         False,
@@ -328,15 +331,25 @@ def load_submission(
                 src, f"multimodality[{i}]", f"{s!r} is not one of this entry's scenarios"
             )
 
-    published_as = _str(src, "published_as", data.get("published_as"), allow_none=True)
-    if published_as is not None and published_names is not None:
+    raw = data.get("published_as")
+    if isinstance(raw, list):
+        published_as = _str_list(src, "published_as", raw, allow_empty=False)
+        dup = sorted({x for x in published_as if published_as.count(x) > 1})
+        if dup:
+            raise SubmissionError(src, "published_as", f"row {dup[0]!r} named twice")
+        fields = [f"published_as[{i}]" for i in range(len(published_as))]
+    else:
+        one = _str(src, "published_as", raw, allow_none=True)
+        published_as, fields = ((), []) if one is None else ((one,), ["published_as"])
+    if published_names is not None and published_as:
         valid = published_names()
-        if published_as not in valid:
-            raise SubmissionError(
-                src,
-                "published_as",
-                f"unknown row {published_as!r} (Table 2/3 rows: {', '.join(sorted(valid))})",
-            )
+        for field, row in zip(fields, published_as, strict=True):
+            if row not in valid:
+                raise SubmissionError(
+                    src,
+                    field,
+                    f"unknown row {row!r} (Table 2/3 rows: {', '.join(sorted(valid))})",
+                )
 
     group = _str(src, "group", data.get("group", "scripted" if training is None else "learned"))
     if group not in GROUPS:
@@ -478,4 +491,14 @@ def load_submissions(
     others = sorted(p.name for p in sub.iterdir() if p.suffix in (".yml", ".json"))
     if others:
         raise UserError(f"{sub}: submissions are .yaml files; rename {', '.join(others)}")
-    return [load_submission(f, d.resolve().parent, published_names) for f in files]
+    subs = [load_submission(f, d.resolve().parent, published_names) for f in files]
+    claimed: dict[str, Submission] = {}
+    for s in subs:
+        for row in s.published_as:
+            if row in claimed:
+                raise UserError(
+                    f"{s.source}: published_as: the paper's row {row!r} is already reproduced "
+                    f"by {claimed[row].source}; a row is shown beside one entry"
+                )
+            claimed[row] = s
+    return subs

@@ -109,7 +109,7 @@ class Repo:
 
     def paper_rows(self, name: str) -> list[report.PaperRow]:
         """The paper's rows the entry reproduces (its ``published_as``), one per density."""
-        row = self.submission(name).published_as
+        rows = self.submission(name).published_as
         return [
             report.PaperRow(
                 label=f"{r.row} — paper {r.table} (published)",
@@ -118,7 +118,7 @@ class Repo:
                 values={METRIC_OF_COLUMN[k]: v for k, v in r.values.items()},
             )
             for r in self.published.rows
-            if row is not None and r.row == row
+            if r.row in rows
         ]
 
     def multimodal(self, name: str) -> list[tuple[str, dict[str, Any]]]:

@@ -134,7 +134,7 @@ def _write(tmp: Path, name: str) -> Entry:
         training=None if GROUP[name] == "scripted" else "train",
         scenarios=(HIGH, FAMILY, FIXED),
         suite=None,
-        published_as=None,
+        published_as=(),
         multimodality=(),
         group=GROUP[name],
     )

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from cdr_bench.errors import UserError
 from cdr_bench.leaderboard.published import load_published
 from cdr_bench.leaderboard.submission import SubmissionError, load_submission, load_submissions
 from tests.leaderboard.conftest import (
@@ -96,6 +97,17 @@ BAD = {
     ),
     "training type": (GOOD.replace("training: null", "training: [a, b]"), "training", "string"),
     "published row": (GOOD + "published_as: GPT-5\n", "published_as", "unknown row"),
+    "published rows": (
+        GOOD + "published_as: [Diffusion-AC, GPT-5]\n",
+        "published_as[1]",
+        "unknown row 'GPT-5'",
+    ),
+    "published row twice": (
+        GOOD + "published_as: [Diffusion-AC, Diffusion-AC]\n",
+        "published_as",
+        "named twice",
+    ),
+    "published rows empty": (GOOD + "published_as: []\n", "published_as", "non-empty list"),
     "multimodality elsewhere": (
         GOOD + "multimodality: [tactical/crossing]\n",
         "multimodality[0]",
@@ -214,8 +226,22 @@ def test_seeds(lb: Path) -> None:
     (view,) = s.seed_views()
     assert view.name == "entry.seed-2" and view.checkpoint == "agents/weave/seed-2.npz"
     assert view.training_logs == ("agents/weave/log-2.jsonl",)
-    assert view.replays == () and view.multimodality == () and view.published_as is None
+    assert view.replays == () and view.multimodality == () and view.published_as == ()
     assert view.scenarios == s.scenarios and view.agent == s.agent
+
+
+def test_one_entry_may_reproduce_two_paper_rows_and_a_row_one_entry(lb: Path) -> None:
+    rows = "published_as: [Diffusion-AC, Diffusion-AC (Complete)]\n"
+    s = load_submission(write(lb, GOOD + rows), lb.parent, load_published(lb).names)
+    assert s.published_as == ("Diffusion-AC", "Diffusion-AC (Complete)")
+    one = load_submission(write(lb, GOOD + "published_as: PPO\n", "one"), lb.parent)
+    assert one.published_as == ("PPO",)
+    write(lb, GOOD + "published_as: Diffusion-AC (Complete)\n", "other")
+    with pytest.raises(UserError) as e:
+        load_submissions(lb, load_published(lb).names)
+    msg = str(e.value)
+    assert "other.yaml: published_as: the paper's row 'Diffusion-AC (Complete)'" in msg
+    assert "entry.yaml" in msg
 
 
 def test_bad_file_name(lb: Path) -> None:
