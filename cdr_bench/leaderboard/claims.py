@@ -14,8 +14,21 @@ Table 2 agents and the Table 3 variants. Rules, decided before looking at the nu
 * *A published number*: held when it lies inside our 95 % interval.
 * *A reduction of about x %*: held when our paired-bootstrap interval of the relative reduction
   contains x.
-* *An ablation is worse than the complete method*: held when the complete method's success is
-  significantly higher (the paired difference's interval above 0) at the budget both ran.
+* *An ablation is worse than the complete method*: with several training seeds of both, held
+  when the probability that a seed of the complete method has a higher success rate on `high`
+  than a seed of the ablation (rliable's probability of improvement, every seed on the same
+  episodes) has its 95 % stratified-bootstrap interval above 0.5; with one seed of either,
+  when the complete method's success is significantly higher (the paired difference's interval
+  above 0). Either way at the budget both ran.
+* *DPSC reduces the convergence steps by about 14 %*: measured with three seeds or more of the
+  complete method and of W/O DPSC, each with its fixed-set learning curve (``curve/`` lines of
+  the trainers: the clean success of the greedy policy on 100 episodes of `high`). The target
+  is 0.9 x the lower of the two methods' final levels (a method's final level: the mean over its
+  seeds of the mean of each curve's last three points); a run's convergence step is the first
+  curve point from which the running mean of three points stays at or above the target to the
+  end (the run's length if it never does). Reduction = 1 - mean(complete) / mean(W/O DPSC), with
+  a bootstrap interval over seeds; held when the interval is above 0. (Fixed before any
+  reference-budget W/O DPSC curve existed: sweeps/CAMPAIGN.md.)
 * *Diffusion-AC is more multimodal than PPO*: held when its mean number of successful manoeuvre
   families per first decision (``cdr-bench multimodal``) is higher on every tactical family.
 * Fig. 7: one claim per factor, the rule of :mod:`cdr_bench.leaderboard.sensitivity`.
@@ -29,7 +42,13 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.evaluate.metrics import resample_indices, role_of
+from cdr_bench.evaluate import aggregate
+from cdr_bench.evaluate.metrics import (
+    BOOTSTRAP_RESAMPLES,
+    BOOTSTRAP_SEED,
+    resample_indices,
+    role_of,
+)
 from cdr_bench.leaderboard.sensitivity import claim_rows as sensitivity_claims
 
 DIFFUSION = "Diffusion-AC"
@@ -42,6 +61,79 @@ NMAC_REDUCTION = 0.59
 """§Abstract and §1: NMAC "reduced by approximately 59 %" against the next-best baseline."""
 
 HELD, NOT_HELD, NOT_MEASURED = "held", "not held", "not measured"
+
+DPSC_REDUCTION = 0.14
+"""§1: DPSC reduces "convergence steps by approximately 14 %"."""
+CONVERGENCE_FRACTION = 0.9
+"""The convergence target: this fraction of the lower of the two methods' final levels."""
+CONVERGENCE_WINDOW = 3
+"""Points of the running mean (and of a curve's final level)."""
+CONVERGENCE_MIN_SEEDS = 3
+
+Curve = list[list[float]]
+"""``[[step, value], ...]`` of one training run."""
+
+
+def convergence_step(curve: Curve, target: float, length: int) -> int:
+    """The first curve point from which the running mean of :data:`CONVERGENCE_WINDOW` points
+    (ending at that point) stays at or above ``target`` to the end; ``length`` if none does."""
+    w = CONVERGENCE_WINDOW
+    vals = [float(v) for _, v in curve]
+    means = [sum(vals[i - w + 1 : i + 1]) / w for i in range(w - 1, len(vals))]
+    first = None
+    for i in range(len(means) - 1, -1, -1):  # from the end back while the mean holds
+        if means[i] < target:
+            break
+        first = i
+    return length if first is None else int(curve[first + w - 1][0])
+
+
+def final_level(curve: Curve) -> float:
+    """Mean of the last :data:`CONVERGENCE_WINDOW` points."""
+    tail = [float(v) for _, v in curve[-CONVERGENCE_WINDOW:]]
+    return sum(tail) / len(tail)
+
+
+def dpsc_convergence(
+    complete: list[tuple[Curve, int]], ablated: list[tuple[Curve, int]]
+) -> dict[str, Any]:
+    """The DPSC convergence measurement of the module docstring. Each run is ``(curve,
+    length)``: its fixed-set curve and its transitions. Returns the target, each run's
+    convergence step, the reduction and its 95 % bootstrap interval over seeds."""
+    level_c = sum(final_level(c) for c, _ in complete) / len(complete)
+    level_a = sum(final_level(c) for c, _ in ablated) / len(ablated)
+    target = CONVERGENCE_FRACTION * min(level_c, level_a)
+    sc = np.array([convergence_step(c, target, n) for c, n in complete], dtype=np.float64)
+    sa = np.array([convergence_step(c, target, n) for c, n in ablated], dtype=np.float64)
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    ic = rng.integers(0, sc.size, (BOOTSTRAP_RESAMPLES, sc.size))
+    ia = rng.integers(0, sa.size, (BOOTSTRAP_RESAMPLES, sa.size))
+    red = 1.0 - sc[ic].mean(axis=1) / sa[ia].mean(axis=1)
+    lo, hi = np.percentile(red, [2.5, 97.5])
+    return {
+        "target": target,
+        "levels": [level_c, level_a],
+        "steps": [sc.astype(int).tolist(), sa.astype(int).tolist()],
+        "reduction": float(1.0 - sc.mean() / sa.mean()),
+        "ci95": [float(lo), float(hi)],
+    }
+
+
+def _runs(e: Any) -> list[Any]:
+    """The scored run of each training seed (the entry itself for one seed)."""
+    return [run for _, run in (getattr(e, "runs", None) or [(None, e)])]
+
+
+def _seed_counts(e: Any, metric: str) -> tuple[Any, int]:
+    """``(runs, 1)`` integer counts of ``metric`` on :data:`SCENARIO` and their common n."""
+    k, ns = [], set()
+    for run in _runs(e):
+        m = run.scenario(SCENARIO)["metrics"]["ownship"][metric]
+        k.append([int(m["count"])])
+        ns.add(int(m["n"]))
+    if len(ns) != 1:
+        raise ValueError(f"{e.name}: episode counts {sorted(ns)} differ between seeds")
+    return np.array(k, dtype=np.int64), ns.pop()
 
 
 def _pct(x: float | None) -> str:
@@ -92,11 +184,14 @@ def build_claims(
     multimodal: dict[tuple[str, str], float],
     latency: dict[str, float],
     sensitivity: dict[str, Any] | None = None,
+    training: dict[str, list[tuple[Curve, int]]] | None = None,
 ) -> list[dict[str, Any]]:
     """``by_row``: published row -> Entry; ``paired.metric(a, b, sid, metric)``: the paired
     difference b - a; ``multimodal``: (entry, scenario) -> mean successful families;
     ``latency``: entry -> median ms per decision on :data:`SCENARIO`; ``sensitivity``: the
-    Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it)."""
+    Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it);
+    ``training``: entry -> ``(fixed-set curve, transitions)`` of each seed that logged one."""
+    training = training or {}
     out: list[dict[str, Any]] = []
 
     def add(cid: str, claim: str, source: str, published_text: str, measured: str,
@@ -255,6 +350,25 @@ def build_claims(
                 "§5.3.1, Table 3", pub_text, "-", NOT_MEASURED,
                 "no entry reproduces the row")  # fmt: skip
             continue
+        if len(_runs(comp)) > 1 and len(_runs(e)) > 1:
+            kc, n = _seed_counts(comp, "success_rate")
+            ka, na = _seed_counts(e, "success_rate")
+            qc, _ = _seed_counts(comp, "clean_success_rate")
+            qa, _ = _seed_counts(e, "clean_success_rate")
+            poi = aggregate.probability_of_improvement(kc, ka)
+            ci = aggregate.probability_of_improvement_interval(kc, ka)
+            assert ci is not None and n == na
+            add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
+                "§5.3.1, Table 3", pub_text,
+                f"success, mean over seeds: {_pct(float(kc.mean()) / n)} ({len(kc)} seeds) vs "
+                f"{_pct(float(ka.mean()) / n)} ({len(ka)} seeds); P(a seed of the complete "
+                f"method above a seed of the ablation) = {poi:.2f} [{ci[0]:.2f}, {ci[1]:.2f}]; "
+                f"clean success {_pct(float(qc.mean()) / n)} vs {_pct(float(qa.mean()) / n)} "
+                f"({comp.name} vs {e.name})",
+                HELD if ci[0] > 0.5 else NOT_HELD,
+                "probability of improvement over seeds, its 95 % stratified-bootstrap "
+                "interval above 0.5")  # fmt: skip
+            continue
         d = paired.metric(comp, e, SCENARIO, "success_rate")  # ablation - complete
         budget = comp.sub.name
         add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
@@ -265,10 +379,33 @@ def build_claims(
             "paired 95 % bootstrap: the ablation significantly below the complete "
             "method")  # fmt: skip
 
-    # 12-13: not measured yet
-    add("dpsc-convergence", "DPSC reduces the convergence steps by about 14 %", "§1",
-        "-14 %", "needs runs with and without DPSC to convergence over several seeds",
-        NOT_MEASURED, "-")  # fmt: skip
+    # 12: DPSC convergence
+    nodpsc = by_row.get("W/O DPSC")
+    runs_c = training.get(comp.name, []) if comp is not None else []
+    runs_a = training.get(nodpsc.name, []) if nodpsc is not None else []
+    test = (
+        "first fixed-set curve point from which the 3-point running mean stays >= 0.9 x the "
+        "lower final level; bootstrap over seeds of 1 - mean(complete) / mean(W/O DPSC), held "
+        "if above 0"
+    )
+    if min(len(runs_c), len(runs_a)) < CONVERGENCE_MIN_SEEDS:
+        seeds_have = f"{COMPLETE} {len(runs_c)}, W/O DPSC {len(runs_a)}"
+        add("dpsc-convergence", "DPSC reduces the convergence steps by about 14 %", "§1",
+            "-14 %", f"needs {CONVERGENCE_MIN_SEEDS} seeds of each with fixed-set learning "
+            f"curves (have: {seeds_have})", NOT_MEASURED, test)  # fmt: skip
+    else:
+        conv = dpsc_convergence(runs_c, runs_a)
+        steps = "; ".join(
+            f"{name} " + " / ".join(f"{x / 1000:.0f}k" for x in st)
+            for name, st in zip((COMPLETE, "W/O DPSC"), conv["steps"], strict=True)
+        )
+        add("dpsc-convergence", "DPSC reduces the convergence steps by about 14 %", "§1",
+            "-14 %",
+            f"target {100 * conv['target']:.1f} % clean success on the fixed set (final levels "
+            f"{100 * conv['levels'][0]:.1f} / {100 * conv['levels'][1]:.1f} %); convergence steps "
+            f"{steps}; reduction {100 * conv['reduction']:+.0f} % [{100 * conv['ci95'][0]:+.0f}, "
+            f"{100 * conv['ci95'][1]:+.0f}]",
+            HELD if conv["ci95"][0] > 0 else NOT_HELD, test)  # fmt: skip
     out.extend(sensitivity_claims(sensitivity))
 
     # 14: latency order

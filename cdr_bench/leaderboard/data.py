@@ -596,6 +596,15 @@ def _seed_counts(e: Entry, sids: list[str]) -> tuple[Any, int]:
     return np.array(k, dtype=np.int64), ns.pop()
 
 
+def _fixed_runs(e: Entry, info: tuple[Any, list[Any], list[Any]]) -> list[tuple[Any, int]]:
+    """``(fixed-set curve, transitions)`` of each seed whose log has one (the claims' DPSC
+    convergence): the transitions of a seed are its curve's last step at least, and its
+    log's final step when all seeds trained the same number."""
+    budget, _, fixed = info
+    total = budget["transitions"] if budget and isinstance(budget["transitions"], int) else None
+    return [(c, max(int(c[-1][0]), total or 0)) for c in fixed if c]
+
+
 def seed_aggregates(
     entries: list[Entry],
     order: list[str],
@@ -850,6 +859,7 @@ def build_data(
                 if CLAIMS_SCENARIO in e.result["timing"]["decision_latency"]
             },
             sensitivity,
+            {e.name: _fixed_runs(e, info[e.name]) for e in entries},
         ),
         "sensitivity": sensitivity,
         "tables": tables,

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from cdr_bench.leaderboard import claims as cl
 from cdr_bench.leaderboard.published import load_published
 
@@ -89,3 +91,95 @@ def test_missing_rows_are_not_measured() -> None:
     v = _verdicts({})
     assert v["best-success_rate"] == "not measured"
     assert all(v[f"ablation-{r}"] == "not measured" for r in cl.ABLATED)
+
+
+@dataclass
+class SeededEntry:
+    """An entry with one scored run per seed: ``success`` and ``clean`` counts of 1000."""
+
+    name: str
+    success: list[int]
+    clean: list[int] = field(default_factory=list)
+
+    @property
+    def sub(self) -> Sub:
+        return Sub(self.name)
+
+    @property
+    def runs(self) -> list[tuple[int, FakeEntry]]:
+        out = []
+        for i, k in enumerate(self.success):
+            q = (self.clean or self.success)[i]
+            run = FakeEntry(f"{self.name}.seed-{i + 1}", {"success_rate": k / 1000})
+            run.counts = {"success_rate": k, "clean_success_rate": q}  # type: ignore[attr-defined]
+            out.append((i + 1, run))
+        return out
+
+    def scenario(self, sid: str) -> dict[str, Any]:
+        return self.runs[0][1].scenario(sid)
+
+
+def _seeded_scenario(self: FakeEntry, sid: str) -> dict[str, Any]:
+    counts = getattr(self, "counts", {})
+    m = {k: {"value": v / 1000, "count": v, "n": 1000} for k, v in counts.items()}
+    return {"metrics": {"ownship": m}} if m else FakeEntry.scenario(self, sid)
+
+
+def _ablation_verdict(complete: list[int], ablated: list[int], monkeypatch) -> dict[str, Any]:
+    monkeypatch.setattr(FakeEntry, "scenario", _seeded_scenario, raising=True)
+    by_row = {
+        cl.COMPLETE: SeededEntry("diffusion-ac", complete),
+        "W/O DPSC": SeededEntry("no-dpsc", ablated),
+    }
+    out = cl.build_claims(by_row, FakePaired(), PUB, {}, {})
+    return next(c for c in out if c["id"] == "ablation-W/O DPSC")
+
+
+def test_ablation_over_seeds_held_only_when_every_seed_pair_separates(monkeypatch) -> None:
+    held = _ablation_verdict([990, 992, 995, 991, 993], [900, 910, 880], monkeypatch)
+    assert held["verdict"] == "held"
+    assert "= 1.00 [1.00, 1.00]" in held["measured"] and "(5 seeds) vs" in held["measured"]
+    # one ablation seed as good as the complete method's seeds: the interval reaches 0.5
+    mixed = _ablation_verdict([990, 992, 995, 991, 993], [900, 999, 880], monkeypatch)
+    assert mixed["verdict"] == "not held"
+    # success saturated (the same count everywhere): ties, P = 0.5
+    tied = _ablation_verdict([999, 999, 999], [999, 999, 999], monkeypatch)
+    assert tied["verdict"] == "not held" and "= 0.50 [0.50, 0.50]" in tied["measured"]
+
+
+def _curve(values: list[float], every: int = 50_000) -> list[list[float]]:
+    return [[i * every, v] for i, v in enumerate(values)]
+
+
+def test_convergence_step_is_where_the_running_mean_stays_above_the_target() -> None:
+    c = _curve([0.1, 0.5, 0.8, 0.9, 0.6, 0.9, 0.9, 0.9, 0.9])
+    # running means (3 points) end at points 2..8: .47 .73 .77 .80 .80 .90 .90
+    assert cl.convergence_step(c, 0.75, 400_000) == 200_000  # from point 4 on, never below
+    assert cl.convergence_step(c, 0.85, 400_000) == 350_000  # the dip keeps it below until 7
+    assert cl.convergence_step(c, 0.95, 400_000) == 400_000  # never: the run's length
+    assert cl.final_level(c) == pytest.approx(0.9)
+
+
+def test_dpsc_convergence_measured_with_three_seeds_of_each() -> None:
+    fast = [_curve([0.1, 0.6, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9]) for _ in range(3)]
+    slow = [_curve([0.1, 0.2, 0.3, 0.6, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9]) for _ in range(3)]
+    r = cl.dpsc_convergence([(c, 400_000) for c in fast], [(c, 500_000) for c in slow])
+    assert r["target"] == pytest.approx(0.81)
+    assert r["steps"] == [[200_000] * 3, [300_000] * 3]  # the mean of 3 points first >= .81
+    assert r["reduction"] == pytest.approx(1 / 3) and r["ci95"] == pytest.approx([1 / 3, 1 / 3])
+
+    def verdict(complete, ablated) -> dict[str, Any]:
+        rates = {"success_rate": 0.9, "los_rate": 0.1, "nmac_rate": 0.01}
+        by_row = {cl.COMPLETE: FakeEntry("dac", rates), "W/O DPSC": FakeEntry("nd", rates)}
+        training = {"dac": complete, "nd": ablated}
+        out = cl.build_claims(by_row, FakePaired(), PUB, {}, {}, None, training)
+        return next(c for c in out if c["id"] == "dpsc-convergence")
+
+    runs_f = [(c, 400_000) for c in fast]
+    runs_s = [(c, 500_000) for c in slow]
+    held = verdict(runs_f, runs_s)
+    assert held["verdict"] == "held" and "reduction +33 % [+33, +33]" in held["measured"]
+    assert "200k / 200k / 200k" in held["measured"]
+    assert verdict(runs_s, runs_f)["verdict"] == "not held"  # DPSC slower
+    few = verdict(runs_f[:2], runs_s)
+    assert few["verdict"] == "not measured" and "Diffusion-AC (Complete) 2" in few["measured"]
