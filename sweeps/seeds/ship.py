@@ -12,15 +12,23 @@ submission file. Unfinished trials are
 skipped (say so); copying is by temporary file and rename, so an interrupted run leaves no
 half-written checkpoint.
 
+    python sweeps/seeds/ship.py runs/sweeps/table3 agents/diffusion_ac \
+        --where ablation=no-dpsc --into ablations/no-dpsc
+
+ships only the trials whose training flags match every ``--where FLAG=VALUE`` (a sweep of
+several settings, such as the Table 3 ablations), into ``<agent_dir>/<into>`` (the same layout:
+the primary seed there, the others in ``seeds/<k>/``).
+
     python sweeps/seeds/ship.py runs/sweeps/seeds-td3 --stage
 
 commits nothing to an agent (its weights are part of its leaderboard identity, so they change
 only with a re-scoring): it copies the finished trials, each as the sweep wrote it (trial.json,
 result.json/.jsonl, checkpoint.pt, log.jsonl, args.json), to ``sweeps/landed/<sweep>/<key>/`` so
 that a finished seed is committed as it lands. That folder is a sweep output folder: copied back
-to ``runs/sweeps/<sweep>/``, ``cdr-bench sweep ... --resume`` skips those trials. Shipping the
-sweep later removes the staged copy (one copy of each checkpoint); trials whose checkpoint is
-already shipped into an agent folder are not staged again.
+to ``runs/sweeps/<sweep>/``, ``cdr-bench sweep ... --resume`` skips those trials. Shipping
+trials later removes their staged copies (one copy of each checkpoint; the staged trials of other
+settings stay); trials whose checkpoint is already shipped into an agent folder are not staged
+again.
 """
 
 from __future__ import annotations
@@ -82,7 +90,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("agent_dir", type=Path, nargs="?", help="the agent's folder, e.g. agents/ppo")
     ap.add_argument("--stage", action="store_true", help="copy to sweeps/landed/ only")
     ap.add_argument("--primary", type=int, default=1, help="seed shipped as the default (1)")
+    ap.add_argument(
+        "--where",
+        action="append",
+        default=[],
+        metavar="FLAG=VALUE",
+        help="only trials trained with this flag value (repeatable), e.g. ablation=no-dpsc",
+    )
+    ap.add_argument(
+        "--into", default="", help="sub-folder of the agent folder, e.g. ablations/no-dpsc"
+    )
     a = ap.parse_args(argv)
+    where = {}
+    for w in a.where:
+        flag, eq, value = w.partition("=")
+        if not eq or not flag:
+            print(f"error: --where {w!r}: expected FLAG=VALUE", file=sys.stderr)
+            return 2
+        where[flag] = value
+    into = Path(a.into)
+    if into.is_absolute() or ".." in into.parts:
+        print(f"error: --into {a.into!r}: expected a path inside the agent folder", file=sys.stderr)
+        return 2
     if a.stage and a.sweep_dir.is_dir():
         return stage(a.sweep_dir)
     if a.agent_dir is None or not a.sweep_dir.is_dir() or not (a.agent_dir / "agent.py").is_file():
@@ -92,14 +121,29 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     shipped: dict[int, Path] = {}
+    keys: list[str] = []
+    root = a.agent_dir / into
+    chosen: dict[int, Path] = {}
     for trial in sorted(a.sweep_dir.glob("*/trial.json")):
         d = trial.parent
         t = json.loads(trial.read_text(encoding="utf-8"))
         seed = int(t["seed"])
+        flags = t.get("train_flags", {})
+        if any(str(flags.get(k)) != v for k, v in where.items()):
+            continue
         if not (d / "checkpoint.pt").is_file() or not (d / "result.json").is_file():
             print(f"skip {d.name} (seed {seed}): not finished")
             continue
-        dest = a.agent_dir if seed == a.primary else a.agent_dir / "seeds" / str(seed)
+        if seed in chosen:
+            print(
+                f"error: trials {chosen[seed].name} and {d.name} both have seed {seed}; "
+                "choose one setting with --where",
+                file=sys.stderr,
+            )
+            return 2
+        chosen[seed] = d
+    for seed, d in sorted(chosen.items()):
+        dest = root if seed == a.primary else root / "seeds" / str(seed)
         args = json.loads((d / "args.json").read_text(encoding="utf-8"))
         args["run_dir"] = os.path.relpath(d.resolve(), ROOT)
         _copy(d / "checkpoint.pt", dest / "checkpoint.pt")
@@ -110,11 +154,16 @@ def main(argv: list[str] | None = None) -> int:
         tmp.write_text(json.dumps(args, indent=2) + "\n", encoding="utf-8")
         os.replace(tmp, dest / "train_args.json")
         shipped[seed] = dest
+        keys.append(d.name)
         print(f"seed {seed}: {d} -> {dest}")
     landed = ROOT / "sweeps" / "landed" / a.sweep_dir.resolve().name
     if shipped and landed.is_dir() and landed.resolve() != a.sweep_dir.resolve():
-        shutil.rmtree(landed)  # one copy: the shipped seeds replace the staged ones
-        print(f"removed the staged copy {landed}")
+        for key in keys:  # one copy: the shipped seeds replace their staged ones
+            if (landed / key).is_dir():
+                shutil.rmtree(landed / key)
+                print(f"removed the staged copy {landed / key}")
+        if not any(landed.iterdir()):
+            landed.rmdir()
     if a.primary not in shipped:
         print(f"note: the primary seed {a.primary} is not finished yet")
     rel = {k: v.resolve().relative_to(ROOT).as_posix() for k, v in sorted(shipped.items())}

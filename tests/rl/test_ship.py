@@ -40,3 +40,32 @@ def test_stage_skips_shipped_and_unfinished_trials(
     out = capsys.readouterr().out
     assert "skip bbb: already shipped as agents/x/seeds/2/checkpoint.pt" in out
     assert "skip ccc: not finished" in out
+
+
+def test_ship_one_setting_into_a_subfolder_keeps_the_other_settings_staged(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    ship = sweep_script("seeds/ship")
+    monkeypatch.setattr(ship, "ROOT", tmp_path)
+    agent = tmp_path / "agents" / "x"
+    agent.mkdir(parents=True)
+    (agent / "agent.py").write_text("class Agent: pass\n")
+    sweep = tmp_path / "runs" / "sweeps" / "table3"
+    for key, seed, ablation in (("a1", 1, "no-dpsc"), ("a2", 2, "no-dpsc"), ("b1", 1, "no-q")):
+        _trial(sweep, key, seed, f"{ablation} {seed}".encode())
+        t = sweep / key / "trial.json"
+        t.write_text(json.dumps({"seed": seed, "train_flags": {"ablation": ablation}}))
+    assert ship.main([str(sweep), "--stage"]) == 0
+    landed = tmp_path / "sweeps" / "landed" / "table3"
+    args = [str(sweep), str(agent), "--where", "ablation=no-dpsc", "--into", "ablations/no-dpsc"]
+    assert ship.main(args) == 0
+    dest = agent / "ablations" / "no-dpsc"
+    assert (dest / "checkpoint.pt").read_bytes() == b"no-dpsc 1"
+    assert (dest / "seeds" / "2" / "checkpoint.pt").read_bytes() == b"no-dpsc 2"
+    assert not (agent / "checkpoint.pt").exists()  # the agent's own run untouched
+    assert sorted(p.name for p in landed.iterdir()) == ["b1"]  # the other setting stays staged
+    # without --where both settings match seed 1: refused, nothing written
+    assert ship.main([str(sweep), str(agent), "--into", "ablations/all"]) == 2
+    assert not (agent / "ablations" / "all").exists()
+    assert ship.main([str(sweep), str(agent), "--into", "../elsewhere"]) == 2
+    assert ship.main([str(sweep), str(agent), "--where", "ablation"]) == 2
