@@ -59,8 +59,12 @@ def _digest(path: Path) -> str:
 
 
 def shipped_checkpoints() -> dict[str, Path]:
-    """sha256 -> path of every checkpoint already shipped into an agent folder."""
-    return {_digest(p): p for p in sorted((ROOT / "agents").rglob("*.pt"))}
+    """sha256 -> path of every checkpoint and training log already shipped into an agent folder
+    (the log too: a shipped checkpoint may have been edited after shipping, e.g. the margin
+    written into an MVP + learned improvement checkpoint, while its log is a byte copy)."""
+    agents = ROOT / "agents"
+    files = [*agents.rglob("*.pt"), *agents.rglob("training_log.jsonl")]
+    return {_digest(p): p for p in sorted(files)}
 
 
 def stage(sweep_dir: Path) -> int:
@@ -72,7 +76,7 @@ def stage(sweep_dir: Path) -> int:
         if not all((d / f).is_file() for f in STAGED):
             print(f"skip {d.name}: not finished")
             continue
-        where = shipped.get(_digest(d / "checkpoint.pt"))
+        where = shipped.get(_digest(d / "checkpoint.pt")) or shipped.get(_digest(d / "log.jsonl"))
         if where is not None:  # one copy of each checkpoint: the agent folder's
             print(f"skip {d.name}: already shipped as {where.relative_to(ROOT)}")
             continue

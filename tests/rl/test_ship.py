@@ -42,6 +42,23 @@ def test_stage_skips_shipped_and_unfinished_trials(
     assert "skip ccc: not finished" in out
 
 
+def test_stage_skips_a_trial_whose_shipped_checkpoint_was_edited(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ship = sweep_script("seeds/ship")
+    monkeypatch.setattr(ship, "ROOT", tmp_path)
+    agent = tmp_path / "agents" / "x"
+    agent.mkdir(parents=True)
+    (agent / "checkpoint.pt").write_bytes(b"weights, margin 0.25")  # edited after shipping
+    (agent / "training_log.jsonl").write_text('{"step": 1, "seed": 1}\n')
+    sweep = tmp_path / "runs" / "sweeps" / "x"
+    _trial(sweep, "aaa", 1, b"weights, margin 0.5")
+    (sweep / "aaa" / "log.jsonl").write_text('{"step": 1, "seed": 1}\n')
+    assert ship.main([str(sweep), "--stage"]) == 0
+    assert not (tmp_path / "sweeps" / "landed" / "x" / "aaa").exists()
+    assert "skip aaa: already shipped as agents/x/training_log.jsonl" in capsys.readouterr().out
+
+
 def test_ship_one_setting_into_a_subfolder_keeps_the_other_settings_staged(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
