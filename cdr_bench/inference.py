@@ -742,6 +742,19 @@ class SafeDQNQ:
         return masked_argmax(qg, safe)
 
 
+def improved_actions(
+    steps: list[SafeDQNQ], observations: Any, masks: Any, base: Any
+) -> NDArray[np.int64]:
+    """Iterated policy improvement (``mvp-improve`` rules, first step first): step k keeps the
+    action of the policy before it unless its own networks find a better one, so the result of
+    ``steps[:k]`` is the base of ``steps[k]``. ``base`` is the first base policy's action
+    (``mvp``'s); no steps: ``base`` itself."""
+    actions = np.asarray(base, np.int64)
+    for step in steps:
+        actions = step.act(observations, masks, base=actions)
+    return actions
+
+
 # ----------------------------------------------------------------------------------------------
 # Diffusion-AC actor (and its categorical ablation)
 

@@ -12,8 +12,10 @@ then score the chosen copy on the leaderboard's episodes.
 
     python sweeps/mvp_improve_margin.py --set 0.25 agents/mvp_improve/checkpoint.pt ...
 
-writes the chosen margin into shipped checkpoints in place (the networks are unchanged: the
-margin plays no part in training, whose behaviour is ``mvp`` and whose targets are ``mvp``'s).
+writes the chosen margin into shipped checkpoints in place (the networks are unchanged: a
+checkpoint's own margin plays no part in its training, whose behaviour and targets are those of
+the policy it evaluates: ``mvp``, or the earlier steps of ``--base-policy``, each with the margin
+it had when the step was trained). The earlier steps are kept as they are.
 """
 
 from __future__ import annotations

@@ -6,10 +6,12 @@ Two Q networks (safety and goal reward, :class:`cdr_bench.rl.safe_dqn.SafeDQNNet
 *evaluate* the geometric resolver ``mvp``. The decision is ``mvp``'s action unless some feasible
 action's safety Q exceeds that of ``mvp``'s action by more than the checkpoint's ``slack``; then
 the largest Q_S + Q_G among those actions (:func:`cdr_bench.rl.safe_dqn.combine`, rule
-``mvp-improve``). ``checkpoint.pt`` beside this file (or ``CDR_BENCH_CHECKPOINT``) holds the
-weights only, read with ``torch.load(weights_only=True)``; the margin is part of the checkpoint
-(``sweeps/mvp_improve_margin.py`` writes copies with other margins and chooses one on episodes
-other than the scored ones). The networks run on the fixed
+``mvp-improve``). A checkpoint of a further step (``--base-policy``) also holds the earlier steps'
+networks (``"base"``): ``mvp``, then each step in turn
+(:func:`cdr_bench.inference.improved_actions`). ``checkpoint.pt`` beside this file (or
+``CDR_BENCH_CHECKPOINT``) holds the weights only, read with ``torch.load(weights_only=True)``;
+the margin is part of the checkpoint (``sweeps/mvp_improve_margin.py`` writes copies with other
+margins and chooses one on episodes other than the scored ones). The networks run on the fixed
 numeric path of :mod:`cdr_bench.inference` and ``mvp`` uses only correctly rounded arithmetic,
 so the decision is the same on every x86-64 CPU.
 """
@@ -22,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from cdr_bench.inference import SafeDQNQ
+from cdr_bench.inference import SafeDQNQ, improved_actions
 from cdr_bench.resolvers import mvp_actions
 
 DEFAULT_CHECKPOINT = Path(__file__).with_name("checkpoint.pt")
@@ -47,14 +49,17 @@ class Agent:
                 f"{self.checkpoint}: not trained with --combine mvp-improve "
                 f"(rule {config.get('rule')!r})"
             )
-        state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
-        self.net = SafeDQNQ(state, config)
+        steps = [*ck.get("base", []), {"config": config, "state_dict": ck["state_dict"]}]
+        self.steps = [
+            SafeDQNQ({k: v.detach().cpu().numpy() for k, v in s["state_dict"].items()}, s["config"])
+            for s in steps
+        ]
 
     def reset(self, seed: int | None = None) -> None:
         """Deterministic policy: nothing to re-seed."""
 
     def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        return self.net.act(observations, masks, base=mvp_actions(observations, masks))
+        return improved_actions(self.steps, observations, masks, mvp_actions(observations, masks))
 
     def act(self, obs_dict: dict) -> int:
         return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])

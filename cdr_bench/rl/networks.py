@@ -410,6 +410,10 @@ class LearnerParts:
     def actor(self) -> nn.Module:
         return getattr(self, self.ACTOR)
 
+    @property
+    def checkpoint_extra(self) -> dict[str, Any]:
+        return {}
+
     def schedule(self, step: int, stage: int | None) -> dict[str, float]:
         return {}
 

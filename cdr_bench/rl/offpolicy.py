@@ -78,6 +78,13 @@ class Learner(Protocol):
         """The inference network (``checkpoint.pt``'s ``state_dict``)."""
         ...
 
+    @property
+    def checkpoint_extra(self) -> dict[str, Any]:
+        """Further entries of ``checkpoint.pt`` the agent needs beside ``config`` and
+        ``state_dict`` (tensors, lists, dicts and numbers only: ``torch.load(weights_only=True)``
+        reads it); usually none."""
+        ...
+
     def schedule(self, step: int, stage: int | None) -> dict[str, float]:
         """Set the scheduled hyper-parameters for this point of training (transitions so far,
         DPSC stage or None) and return them (logged as ``charts/<name>``)."""
@@ -229,7 +236,11 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
             "algorithm": algorithm.name,
             "args": dataclasses.asdict(args),
         }
-        checkpoint = {"config": learner.config, "state_dict": learner.actor.state_dict()}
+        checkpoint = {
+            **learner.checkpoint_extra,
+            "config": learner.config,
+            "state_dict": learner.actor.state_dict(),
+        }
         torch.save({**checkpoint, "meta": meta}, os.path.join(args.run_dir, "checkpoint.pt"))
 
     # The loop, batched over the n_envs episodes.

@@ -23,7 +23,9 @@ offers two documented rules (:func:`combine`), chosen with ``--combine``:
   action unless some feasible action's Q_S exceeds Q_S of ``mvp``'s action by more than
   ``slack``; then it is the largest Q_S + Q_G among those actions. Policy improvement
   (Howard 1960; Bertsekas' rollout) with a margin against the critic's error: with exact Q
-  values it is never worse than ``mvp``.
+  values it is never worse than ``mvp``. A further step (``base_steps``, ``--base-policy``)
+  evaluates and improves such an improved policy in place of ``mvp`` (policy iteration, one
+  step per training run); the checkpoint keeps the earlier steps' networks under ``"base"``.
 
 Masks: every rule chooses among the feasible actions only, in acting and in the targets.
 Targets are double-Q style: the online networks choose the next action with the rule, the
@@ -34,12 +36,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from cdr_bench.inference import SafeDQNQ, improved_actions
 from cdr_bench.resolvers import mvp_actions
 from cdr_bench.rl.networks import N_ACTIONS, LearnerParts, frozen_copy, mlp, polyak_update
 
@@ -117,6 +121,11 @@ class SafeDQN(LearnerParts):
     Exploration is epsilon-greedy over the feasible actions: with probability ``epsilon(step)``
     a uniformly random feasible action (drawn from ``rng``), otherwise the combination rule.
     Without ``epsilon`` it never explores.
+
+    ``base_steps`` (``mvp-improve`` only): earlier improvement steps, first step first, each
+    ``{"config", "state_dict"}`` as in a ``checkpoint.pt``. The policy evaluated and improved
+    is then ``mvp`` followed by these steps (:func:`cdr_bench.inference.improved_actions`)
+    instead of ``mvp`` alone; they are frozen and written into the checkpoint (``"base"``).
     """
 
     PARTS = ("net", "target", "opt")
@@ -129,7 +138,15 @@ class SafeDQN(LearnerParts):
         polyak: float = 5e-3,
         epsilon: Callable[[int], float] | None = None,
         rng: np.random.Generator | None = None,
+        base_steps: list[dict[str, Any]] | None = None,
     ):
+        if base_steps and cfg.rule != "mvp-improve":
+            raise ValueError("earlier improvement steps (base_steps) need the mvp-improve rule")
+        self.base_steps = list(base_steps or [])
+        self._base = [
+            SafeDQNQ({k: v.detach().cpu().numpy() for k, v in b["state_dict"].items()}, b["config"])
+            for b in self.base_steps
+        ]
         self.net = SafeDQNNet(cfg)
         self.target: SafeDQNNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
@@ -143,10 +160,18 @@ class SafeDQN(LearnerParts):
         self.epsilon = self.epsilon_schedule(step)
         return {"epsilon": self.epsilon}
 
+    @property
+    def checkpoint_extra(self) -> dict[str, Any]:
+        return {"base": self.base_steps} if self.base_steps else {}
+
+    def base_actions(self, obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """The evaluated policy's actions (``mvp-improve``): ``mvp``, then the earlier steps."""
+        return improved_actions(self._base, obs, mask, mvp_actions(obs, mask))
+
     def act(self, obs: np.ndarray, mask: np.ndarray, explore: bool) -> np.ndarray:
         if self.cfg.rule == "mvp-improve":
-            base = mvp_actions(obs, mask)
-            if explore:  # the behaviour is mvp (with epsilon-random actions below)
+            base = self.base_actions(obs, mask)
+            if explore:  # the behaviour is the base policy (with epsilon-random actions below)
                 actions = base
             else:
                 base_t = torch.from_numpy(base)
@@ -166,10 +191,12 @@ class SafeDQN(LearnerParts):
     @torch.no_grad()
     def targets(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """y_S = r_S + gamma (1 - done) Q_S'(s', a*), y_G likewise, a* = rule on the online
-        networks over the next state's feasible actions (``mvp-improve``: a* = mvp's action, so
-        the networks evaluate mvp)."""
+        networks over the next state's feasible actions (``mvp-improve``: a* = the base policy's
+        action, mvp's or the earlier steps', so the networks evaluate that policy)."""
         if self.cfg.rule == "mvp-improve":
-            a_star = torch.from_numpy(mvp_actions(b["next_obs"].numpy(), b["next_mask"].numpy()))
+            a_star = torch.from_numpy(
+                self.base_actions(b["next_obs"].numpy(), b["next_mask"].numpy())
+            )
         else:
             qs_on, qg_on = self.net(b["next_obs"])
             a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)

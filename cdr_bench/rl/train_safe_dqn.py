@@ -12,11 +12,13 @@ combination rule (``--combine``). ``checkpoint.pt`` is loaded by agents/safe_dqn
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from cdr_bench.errors import UserError
 from cdr_bench.rl.common import linear_schedule, same_named
 from cdr_bench.rl.offpolicy import OffPolicyAlgorithm, OffPolicyArgs
 
@@ -41,6 +43,10 @@ class Args(OffPolicyArgs):
     slack: float = 0.1
     """lexicographic: actions within this of the best safety Q count as safe; mvp-improve: the
     safety-Q gain over mvp's action needed to deviate from it"""
+    base_policy: str = ""
+    """mvp-improve only: a checkpoint.pt of an earlier improvement step (trained with --combine
+    mvp-improve); the networks then evaluate and improve that policy instead of mvp alone (a
+    further step of policy iteration). Empty: mvp"""
     eps_start: float = 1.0
     """epsilon of epsilon-greedy at the start"""
     eps_end: float = 0.05
@@ -51,6 +57,39 @@ class Args(OffPolicyArgs):
     def __post_init__(self) -> None:
         if self.combine not in RULES:
             raise ValueError(f"--combine must be one of {RULES}, got {self.combine!r}")
+        if self.base_policy and self.combine != "mvp-improve":
+            raise ValueError(
+                "--base-policy is a step of policy improvement: it needs "
+                f"--combine mvp-improve, got --combine {self.combine}"
+            )
+
+
+def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
+    """The improvement steps of the ``mvp-improve`` checkpoint at ``path``, first step first
+    (its own ``"base"``, then itself): what ``--base-policy`` evaluates and improves."""
+    import torch
+
+    if not os.path.isfile(path):
+        raise UserError(
+            f"--base-policy {path}: no such file (a checkpoint.pt trained with "
+            "--combine mvp-improve)"
+        )
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+        config, state = ck["config"], ck["state_dict"]
+    except Exception as e:  # a file that is not a checkpoint: say so, not a traceback
+        raise UserError(f"--base-policy {path}: not a cdr-bench checkpoint.pt ({e})") from None
+    if config.get("rule") != "mvp-improve":
+        raise UserError(
+            f"--base-policy {path}: not trained with --combine mvp-improve "
+            f"(rule {config.get('rule')!r})"
+        )
+    if config.get("obs_dim") != obs_dim:
+        raise UserError(
+            f"--base-policy {path}: observations of {config.get('obs_dim')} "
+            f"features, this environment's have {obs_dim}"
+        )
+    return [*ck.get("base", []), {"config": config, "state_dict": state}]
 
 
 def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> SafeDQN:
@@ -60,7 +99,11 @@ def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> S
         linear_schedule, args.eps_start, args.eps_end, args.eps_fraction * args.total_steps
     )
     cfg = SafeDQNConfig(**same_named(args, SafeDQNConfig, obs_dim=obs_dim, rule=args.combine))
-    return SafeDQN(cfg, **same_named(args, ("lr", "gamma", "polyak"), epsilon=epsilon, rng=rng))
+    base = base_steps(args.base_policy, obs_dim) if args.base_policy else None
+    return SafeDQN(
+        cfg,
+        **same_named(args, ("lr", "gamma", "polyak"), epsilon=epsilon, rng=rng, base_steps=base),
+    )
 
 
 ALGORITHM = OffPolicyAlgorithm("safe-dqn-x", "Safe-DQN-X", Args, build)

@@ -11,10 +11,13 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from cdr_bench.inference import SafeDQNQ  # noqa: E402
+from cdr_bench.errors import UserError  # noqa: E402
+from cdr_bench.inference import SafeDQNQ, improved_actions  # noqa: E402
 from cdr_bench.resolvers import mvp_actions  # noqa: E402
 from cdr_bench.rl.common import TrainArgs, training_env  # noqa: E402
 from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig, combine  # noqa: E402
+from cdr_bench.rl.train_safe_dqn import Args as SafeDQNArgs  # noqa: E402
+from cdr_bench.rl.train_safe_dqn import base_steps  # noqa: E402
 
 from .helpers import ROOT, cdr_bench, sweep_script  # noqa: E402
 from .test_safe_dqn import _q  # noqa: E402
@@ -161,3 +164,117 @@ def test_margin_written_in_place_only_into_mvp_improve_checkpoints(improve_run, 
         assert torch.equal(v, new["state_dict"][k])
     with pytest.raises(SystemExit):
         margin.main([str(a)])  # neither --slack nor --set
+
+
+# --- further steps: policy iteration on mvp (--base-policy) ------------------------------------
+
+
+def _spread_step(obs_dim, seed, slack):
+    """An improvement step with random networks whose Q values are spread enough to deviate."""
+    torch.manual_seed(seed)
+    net = SafeDQN(SafeDQNConfig(obs_dim=obs_dim, width=32, rule="mvp-improve", slack=slack)).net
+    with torch.no_grad():
+        for p in net.parameters():
+            p.mul_(3.0)
+    return {
+        "config": {"obs_dim": obs_dim, "width": 32, "rule": "mvp-improve", "slack": slack},
+        "state_dict": {k: v.clone() for k, v in net.state_dict().items()},
+    }
+
+
+def _fixed(step):
+    return SafeDQNQ({k: v.numpy() for k, v in step["state_dict"].items()}, step["config"])
+
+
+def test_improved_actions_applies_the_steps_in_order():
+    obs, mask = _states(300)
+    s1, s2 = (_fixed(_spread_step(obs.shape[1], seed, 0.02)) for seed in (1, 2))
+    base = mvp_actions(obs, mask)
+    np.testing.assert_array_equal(improved_actions([], obs, mask, base), base)
+    first = s1.act(obs, mask, base=base)
+    second = s2.act(obs, mask, base=first)
+    np.testing.assert_array_equal(improved_actions([s1, s2], obs, mask, base), second)
+    assert (first != base).any() and (second != first).any()  # each step deviates somewhere
+    # the order matters: s2 then s1 is another policy
+    assert (improved_actions([s2, s1], obs, mask, base) != second).any()
+
+
+def test_a_second_step_evaluates_the_first_step_not_mvp():
+    obs, mask = _states(64)
+    step1 = _spread_step(obs.shape[1], 1, 0.02)
+    learner = SafeDQN(
+        SafeDQNConfig(obs_dim=obs.shape[1], width=16, rule="mvp-improve", slack=0.0),
+        gamma=0.9,
+        epsilon=lambda step: 0.0,
+        rng=np.random.default_rng(0),
+        base_steps=[step1],
+    )
+    learner.schedule(0, None)
+    pi1 = _fixed(step1).act(obs, mask, base=mvp_actions(obs, mask))
+    assert (pi1 != mvp_actions(obs, mask)).any()
+    np.testing.assert_array_equal(learner.act(obs, mask, explore=True), pi1)  # behaviour
+    b = {
+        "next_obs": torch.from_numpy(obs),
+        "next_mask": torch.from_numpy(mask),
+        "done": torch.zeros(len(obs)),
+        "safety_reward": torch.zeros(len(obs)),
+        "goal_reward": torch.zeros(len(obs)),
+    }
+    y_s, _ = learner.targets(b)
+    qs, _ = learner.target(b["next_obs"])
+    torch.testing.assert_close(y_s, 0.9 * qs[torch.arange(len(pi1)), torch.from_numpy(pi1)])
+    assert learner.checkpoint_extra == {"base": [step1]}
+    with pytest.raises(ValueError, match="need the mvp-improve rule"):
+        SafeDQN(SafeDQNConfig(obs_dim=obs.shape[1], rule="sum"), base_steps=[step1])
+
+
+def _train_step(run_dir, base=None):
+    extra = ["--base-policy", str(base)] if base else []
+    return cdr_bench(
+        "train", "safe-dqn-x", "--combine", "mvp-improve", "--run-dir", str(run_dir),
+        "--total-steps", "200", "--n-envs", "4", "--no-curriculum", "--scenario", "high",
+        "--eval-episodes", "0", "--curve-every", "0", "--no-progress", "--width", "16",
+        "--learning-starts", "64", "--batch-size", "16", "--buffer-size", "2000", *extra,
+    )  # fmt: skip
+
+
+def test_further_steps_from_the_cli(improve_run, tmp_path):
+    """Step 2 trained on the step-1 run carries step 1's networks; a step 3 on it would evaluate
+    both; the agent plays the steps in order (a huge margin on the last gives the step before)."""
+    first = improve_run / "checkpoint.pt"
+    assert _train_step(tmp_path / "two", first).returncode == 0
+    ck1 = torch.load(first, weights_only=True)
+    ck2 = torch.load(tmp_path / "two" / "checkpoint.pt", weights_only=True)
+    assert "base" not in ck1 and len(ck2["base"]) == 1
+    for k, v in ck1["state_dict"].items():
+        assert torch.equal(ck2["base"][0]["state_dict"][k], v)
+    obs_dim = ck1["config"]["obs_dim"]
+    three = base_steps(str(tmp_path / "two" / "checkpoint.pt"), obs_dim)  # what step 3 evaluates
+    assert [s["config"] for s in three] == [ck1["config"], ck2["config"]]
+    obs, mask = _states(200)
+    (two_mute,) = margin.with_slack(tmp_path / "two" / "checkpoint.pt", tmp_path / "m", [1e9])
+    assert len(torch.load(two_mute, weights_only=True)["base"]) == 1  # the margin keeps the base
+    np.testing.assert_array_equal(
+        _agent(two_mute).act_batch(obs, mask), _agent(first).act_batch(obs, mask)
+    )
+    a2 = _agent(tmp_path / "two" / "checkpoint.pt").act_batch(obs, mask)
+    assert (mask[np.arange(len(a2)), a2] == 1).all()
+
+
+def test_base_policy_errors(improve_run, tmp_path):
+    r = _train_step(tmp_path / "x", tmp_path / "missing.pt")  # through the CLI: one clear line
+    assert r.returncode == 2 and "--base-policy" in r.stderr and "no such file" in r.stderr
+    assert "Traceback" not in r.stderr
+    obs_dim = torch.load(improve_run / "checkpoint.pt", weights_only=True)["config"]["obs_dim"]
+    ck = torch.load(improve_run / "checkpoint.pt", weights_only=True)
+    ck["config"]["rule"] = "sum"
+    torch.save(ck, tmp_path / "sum.pt")
+    with pytest.raises(UserError, match="sum.pt: not trained with --combine mvp-improve"):
+        base_steps(str(tmp_path / "sum.pt"), obs_dim)
+    (tmp_path / "junk.pt").write_text("not a checkpoint")
+    with pytest.raises(UserError, match="junk.pt: not a cdr-bench checkpoint.pt"):
+        base_steps(str(tmp_path / "junk.pt"), obs_dim)
+    with pytest.raises(UserError, match=f"observations of {obs_dim} features, this .* 7"):
+        base_steps(str(improve_run / "checkpoint.pt"), 7)
+    with pytest.raises(ValueError, match="needs --combine mvp-improve, got --combine sum"):
+        SafeDQNArgs(base_policy=str(improve_run / "checkpoint.pt"))
