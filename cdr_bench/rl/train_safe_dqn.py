@@ -66,8 +66,11 @@ class Args(OffPolicyArgs):
 
 def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
     """The improvement steps of the ``mvp-improve`` checkpoint at ``path``, first step first
-    (its own ``"base"``, then itself): what ``--base-policy`` evaluates and improves."""
+    (its own ``"base"``, then itself): what ``--base-policy`` evaluates and improves. Each step
+    is checked (rule, observation size, networks) before training starts."""
     import torch
+
+    from cdr_bench.inference import SafeDQNQ
 
     if not os.path.isfile(path):
         raise UserError(
@@ -76,20 +79,29 @@ def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
         )
     try:
         ck = torch.load(path, map_location="cpu", weights_only=True)
-        config, state = ck["config"], ck["state_dict"]
+        steps = [*ck.get("base", []), {"config": ck["config"], "state_dict": ck["state_dict"]}]
     except Exception as e:  # a file that is not a checkpoint: say so, not a traceback
         raise UserError(f"--base-policy {path}: not a cdr-bench checkpoint.pt ({e})") from None
-    if config.get("rule") != "mvp-improve":
-        raise UserError(
-            f"--base-policy {path}: not trained with --combine mvp-improve "
-            f"(rule {config.get('rule')!r})"
-        )
-    if config.get("obs_dim") != obs_dim:
-        raise UserError(
-            f"--base-policy {path}: observations of {config.get('obs_dim')} "
-            f"features, this environment's have {obs_dim}"
-        )
-    return [*ck.get("base", []), {"config": config, "state_dict": state}]
+    for k, step in enumerate(steps, 1):
+        where = f"--base-policy {path}" + (f", step {k} of {len(steps)}" if len(steps) > 1 else "")
+        try:
+            config, state = dict(step["config"]), dict(step["state_dict"])
+        except Exception:
+            raise UserError(f"{where}: not a step of a cdr-bench checkpoint.pt") from None
+        if config.get("rule") != "mvp-improve":
+            raise UserError(
+                f"{where}: not trained with --combine mvp-improve (rule {config.get('rule')!r})"
+            )
+        if config.get("obs_dim") != obs_dim:
+            raise UserError(
+                f"{where}: observations of {config.get('obs_dim')} features, this "
+                f"environment's have {obs_dim}"
+            )
+        try:
+            SafeDQNQ({n: v.detach().cpu().numpy() for n, v in state.items()}, config)
+        except Exception as e:
+            raise UserError(f"{where}: its networks do not load ({e!r})") from None
+    return steps
 
 
 def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> SafeDQN:

@@ -276,5 +276,14 @@ def test_base_policy_errors(improve_run, tmp_path):
         base_steps(str(tmp_path / "junk.pt"), obs_dim)
     with pytest.raises(UserError, match=f"observations of {obs_dim} features, this .* 7"):
         base_steps(str(improve_run / "checkpoint.pt"), 7)
+    broken = torch.load(improve_run / "checkpoint.pt", weights_only=True)
+    broken["base"] = [{"config": dict(broken["config"]), "state_dict": {}}]
+    torch.save(broken, tmp_path / "broken.pt")
+    with pytest.raises(UserError, match="broken.pt, step 1 of 2: its networks do not load"):
+        base_steps(str(tmp_path / "broken.pt"), obs_dim)
+    broken["base"] = ["junk"]
+    torch.save(broken, tmp_path / "broken.pt")
+    with pytest.raises(UserError, match="step 1 of 2: not a step of a cdr-bench checkpoint"):
+        base_steps(str(tmp_path / "broken.pt"), obs_dim)
     with pytest.raises(ValueError, match="needs --combine mvp-improve, got --combine sum"):
         SafeDQNArgs(base_policy=str(improve_run / "checkpoint.pt"))
