@@ -76,25 +76,38 @@ def test_torch_and_inference_path_decide_alike():
     assert (mask[np.arange(len(a_fixed)), a_fixed] == 1).all()
 
 
-def test_the_networks_evaluate_mvp():
-    obs, mask = _states(64)
+def _evaluating_learner(obs, base_steps=None):
+    """An mvp-improve learner that never explores (gamma 0.9, zero margin)."""
     learner = SafeDQN(
         SafeDQNConfig(obs_dim=obs.shape[1], width=16, rule="mvp-improve", slack=0.0),
         gamma=0.9,
         epsilon=lambda step: 0.0,
         rng=np.random.default_rng(0),
+        base_steps=base_steps,
     )
     learner.schedule(0, None)
+    return learner
+
+
+def _next_states(obs, mask):
+    """A replay batch whose next states are ``obs`` (zero rewards, not done)."""
+    zeros = torch.zeros(len(obs))
+    return {
+        "next_obs": torch.from_numpy(obs),
+        "next_mask": torch.from_numpy(mask),
+        "done": zeros,
+        "safety_reward": zeros,
+        "goal_reward": zeros,
+    }
+
+
+def test_the_networks_evaluate_mvp():
+    obs, mask = _states(64)
+    learner = _evaluating_learner(obs)
     # Behaviour without exploration is mvp itself, whatever the networks say.
     np.testing.assert_array_equal(learner.act(obs, mask, explore=True), mvp_actions(obs, mask))
     # Targets bootstrap with mvp's next action.
-    b = {
-        "next_obs": torch.from_numpy(obs),
-        "next_mask": torch.from_numpy(mask),
-        "done": torch.zeros(len(obs)),
-        "safety_reward": torch.zeros(len(obs)),
-        "goal_reward": torch.zeros(len(obs)),
-    }
+    b = _next_states(obs, mask)
     y_s, y_g = learner.targets(b)
     qs, qg = learner.target(b["next_obs"])
     a = torch.from_numpy(mvp_actions(obs, mask))
@@ -202,24 +215,11 @@ def test_improved_actions_applies_the_steps_in_order():
 def test_a_second_step_evaluates_the_first_step_not_mvp():
     obs, mask = _states(64)
     step1 = _spread_step(obs.shape[1], 1, 0.02)
-    learner = SafeDQN(
-        SafeDQNConfig(obs_dim=obs.shape[1], width=16, rule="mvp-improve", slack=0.0),
-        gamma=0.9,
-        epsilon=lambda step: 0.0,
-        rng=np.random.default_rng(0),
-        base_steps=[step1],
-    )
-    learner.schedule(0, None)
+    learner = _evaluating_learner(obs, base_steps=[step1])
     pi1 = _fixed(step1).act(obs, mask, base=mvp_actions(obs, mask))
     assert (pi1 != mvp_actions(obs, mask)).any()
     np.testing.assert_array_equal(learner.act(obs, mask, explore=True), pi1)  # behaviour
-    b = {
-        "next_obs": torch.from_numpy(obs),
-        "next_mask": torch.from_numpy(mask),
-        "done": torch.zeros(len(obs)),
-        "safety_reward": torch.zeros(len(obs)),
-        "goal_reward": torch.zeros(len(obs)),
-    }
+    b = _next_states(obs, mask)
     y_s, _ = learner.targets(b)
     qs, _ = learner.target(b["next_obs"])
     torch.testing.assert_close(y_s, 0.9 * qs[torch.arange(len(pi1)), torch.from_numpy(pi1)])
