@@ -724,6 +724,17 @@ class SafeDQNQ:
         if self.rule not in ("sum", "lexicographic", "mvp-improve"):
             raise ValueError(f"unknown combination rule {self.rule!r}")
 
+    @classmethod
+    def from_step(cls, step: Mapping[str, Any]) -> SafeDQNQ:
+        """One improvement step as checkpoints store it: ``{"config", "state_dict"}``, the
+        state dict's values torch tensors (as ``torch.load`` returns them) or arrays; the
+        checkpoint's top level is its last step, its ``"base"`` list the earlier ones."""
+        sd = {
+            k: v.detach().cpu().numpy() if hasattr(v, "detach") else np.asarray(v)
+            for k, v in step["state_dict"].items()
+        }
+        return cls(sd, step["config"])
+
     def act(self, observations: Any, masks: Any, base: Any | None = None) -> NDArray[np.int64]:
         qs, qg = self.safety(observations), self.goal(observations)
         if self.rule == "sum":

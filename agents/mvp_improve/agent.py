@@ -50,10 +50,7 @@ class Agent:
                 f"(rule {config.get('rule')!r})"
             )
         steps = [*ck.get("base", []), {"config": config, "state_dict": ck["state_dict"]}]
-        self.steps = [
-            SafeDQNQ({k: v.detach().cpu().numpy() for k, v in s["state_dict"].items()}, s["config"])
-            for s in steps
-        ]
+        self.steps = [SafeDQNQ.from_step(s) for s in steps]
 
     def reset(self, seed: int | None = None) -> None:
         """Deterministic policy: nothing to re-seed."""

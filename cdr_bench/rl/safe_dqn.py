@@ -143,10 +143,7 @@ class SafeDQN(LearnerParts):
         if base_steps and cfg.rule != "mvp-improve":
             raise ValueError("earlier improvement steps (base_steps) need the mvp-improve rule")
         self.base_steps = list(base_steps or [])
-        self._base = [
-            SafeDQNQ({k: v.detach().cpu().numpy() for k, v in b["state_dict"].items()}, b["config"])
-            for b in self.base_steps
-        ]
+        self._base = [SafeDQNQ.from_step(b) for b in self.base_steps]
         self.net = SafeDQNNet(cfg)
         self.target: SafeDQNNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)

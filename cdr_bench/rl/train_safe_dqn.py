@@ -85,7 +85,7 @@ def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
     for k, step in enumerate(steps, 1):
         where = f"--base-policy {path}" + (f", step {k} of {len(steps)}" if len(steps) > 1 else "")
         try:
-            config, state = dict(step["config"]), dict(step["state_dict"])
+            config, _ = dict(step["config"]), dict(step["state_dict"])  # both mappings
         except Exception:
             raise UserError(f"{where}: not a step of a cdr-bench checkpoint.pt") from None
         if config.get("rule") != "mvp-improve":
@@ -98,7 +98,7 @@ def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
                 f"environment's have {obs_dim}"
             )
         try:
-            SafeDQNQ({n: v.detach().cpu().numpy() for n, v in state.items()}, config)
+            SafeDQNQ.from_step(step)
         except Exception as e:
             raise UserError(f"{where}: its networks do not load ({e!r})") from None
     return steps

@@ -195,13 +195,19 @@ def _spread_step(obs_dim, seed, slack):
     }
 
 
-def _fixed(step):
-    return SafeDQNQ({k: v.numpy() for k, v in step["state_dict"].items()}, step["config"])
+def test_a_step_loads_from_tensors_or_arrays_alike():
+    obs, mask = _states(300)
+    step = _spread_step(obs.shape[1], 1, 0.02)
+    arrays = {**step, "state_dict": {k: v.numpy().copy() for k, v in step["state_dict"].items()}}
+    base = mvp_actions(obs, mask)
+    a = SafeDQNQ.from_step(step).act(obs, mask, base=base)
+    np.testing.assert_array_equal(SafeDQNQ.from_step(arrays).act(obs, mask, base=base), a)
+    assert (a != base).any()
 
 
 def test_improved_actions_applies_the_steps_in_order():
     obs, mask = _states(300)
-    s1, s2 = (_fixed(_spread_step(obs.shape[1], seed, 0.02)) for seed in (1, 2))
+    s1, s2 = (SafeDQNQ.from_step(_spread_step(obs.shape[1], seed, 0.02)) for seed in (1, 2))
     base = mvp_actions(obs, mask)
     np.testing.assert_array_equal(improved_actions([], obs, mask, base), base)
     first = s1.act(obs, mask, base=base)
@@ -216,7 +222,7 @@ def test_a_second_step_evaluates_the_first_step_not_mvp():
     obs, mask = _states(64)
     step1 = _spread_step(obs.shape[1], 1, 0.02)
     learner = _evaluating_learner(obs, base_steps=[step1])
-    pi1 = _fixed(step1).act(obs, mask, base=mvp_actions(obs, mask))
+    pi1 = SafeDQNQ.from_step(step1).act(obs, mask, base=mvp_actions(obs, mask))
     assert (pi1 != mvp_actions(obs, mask)).any()
     np.testing.assert_array_equal(learner.act(obs, mask, explore=True), pi1)  # behaviour
     b = _next_states(obs, mask)
