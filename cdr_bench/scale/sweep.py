@@ -22,8 +22,10 @@ Fault tolerance without a scheduler of our own:
   transitions); the next attempt of the trial takes the folder over and continues the training
   exactly (``cdr-bench train --resume``), losing at most the transitions since that state. An
   attempt holds an exclusive ``flock`` on ``<work>/.lock`` while it runs (released by the
-  kernel when its process dies), so a live attempt's folder is never taken; the work folders
-  left at the end of a sweep (trials that failed for good) are removed.
+  kernel when its process dies), so a live attempt's folder is never taken. At the end of a
+  sweep the work folders with nothing to continue are removed; one that holds the saved state
+  of a trial that has not landed is kept, whatever ended its attempt (a raylet killed under it,
+  a failure that retries did not cure), so that the next ``--resume`` continues it.
 
 On a cluster of several machines ``--out``, the agent file and the Python environment must be
 at the same paths on every node (a shared file system), as for any Ray job without a
@@ -147,16 +149,21 @@ def _claim_attempt(root: Path, key: str) -> tuple[Path, int, str]:
     return work, fd, ""
 
 
-def remove_idle_work(out: Path) -> None:
-    """Remove the work folders of ``out`` that no live attempt holds (and ``.work`` once empty).
+def remove_idle_work(out: Path) -> list[Path]:
+    """Remove the work folders of ``out`` that no live attempt holds and that hold nothing to
+    continue (and ``.work`` once empty); return the idle ones kept because they do.
     Another sweep process may run in the same output folder (one per core, several seeds): its
-    attempts hold the lock of their folder until they land, so they are left alone."""
+    attempts hold the lock of their folder until they land, so they are left alone. An idle
+    folder with a saved training state (``state.pt``) or a finished training (``train.done``)
+    of a trial that has not landed is the progress ``--resume`` continues: kept. (Before this, a
+    sweep whose raylet was killed under a running trial deleted an hour of its training.)"""
     import fcntl
 
     work = out / ".work"
+    kept: list[Path] = []
     if not work.is_dir():
-        return
-    for d in work.iterdir():
+        return kept
+    for d in sorted(work.iterdir()):
         if d.name.endswith(TRIAL_LOCK):  # a trial's lock: removed unless a live attempt holds it
             fd = os.open(d, os.O_RDWR)
             try:
@@ -176,9 +183,15 @@ def remove_idle_work(out: Path) -> None:
                 continue
             finally:
                 os.close(fd)
+        key = d.name.rsplit("-", 1)[0]
+        resumable = (d / "state.pt").is_file() or (d / "train.done").is_file()
+        if resumable and not (out / key / TRIAL_FILE).is_file():
+            kept.append(d)
+            continue
         shutil.rmtree(d, ignore_errors=True)
     with contextlib.suppress(OSError):
         work.rmdir()
+    return kept
 
 
 def _run_attempt(trial: Trial, root: Path, final: Path, work: Path, resumed: str) -> dict[str, Any]:
@@ -297,7 +310,7 @@ def run_sweep(
     failures: dict[str, str] = {}
     if todo:
         failures = _run_on_ray(todo, out, sweep, address, num_cpus, say)
-    remove_idle_work(out)
+    kept = remove_idle_work(out)
     summary = {
         "name": sweep.name,
         "sweep_file": str(sweep.source),
@@ -315,6 +328,7 @@ def run_sweep(
             for t in sweep.trials
         ],
         "failures": failures,
+        "resumable": sorted(str(d.relative_to(out)) for d in kept),
     }
     atomic_write_text(out / "sweep.json", json.dumps(summary, indent=1) + "\n")
     if failures:
@@ -322,6 +336,12 @@ def run_sweep(
         raise UserError(
             f"{len(failures)} of {len(sweep.trials)} trials failed (see {out}/sweep.json); "
             f"the others are kept; first: {first.splitlines()[0]}"
+            + (
+                f"; the saved training state of {len(kept)} unfinished trial(s) is kept in "
+                f"{out}/.work: run the sweep again with --resume to continue it"
+                if kept
+                else ""
+            )
         )
     return summary
 
