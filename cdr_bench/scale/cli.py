@@ -46,6 +46,14 @@ def register(sub: Any) -> None:
         metavar="FLAG=VALUE",
         help="override a trainer flag of `fixed` (repeatable), e.g. --set learning-starts=500",
     )
+    p.add_argument(
+        "--where",
+        action="append",
+        default=[],
+        metavar="FLAG=VALUE",
+        help="run only the trials whose training flag has this value (repeatable; the trial "
+        "keys stay those of the whole sweep), e.g. --where ablation=no-dpsc",
+    )
     p.add_argument("--dry-run", action="store_true", help="list the trials, run nothing")
     p.add_argument("--quiet", action="store_true", help="no per-trial lines")
     p.set_defaults(func=_sweep)
@@ -66,12 +74,20 @@ def _sweep(args: argparse.Namespace) -> int:
     from cdr_bench.errors import UserError
     from cdr_bench.scale.config import load_sweep
 
-    overrides: dict[str, Any] = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UserError(f"--set {item!r}: expected FLAG=VALUE")
-        overrides[key] = yaml.safe_load(value)
+    def pairs(option: str, items: list[str]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for item in items:
+            key, sep, value = item.partition("=")
+            if not sep or not key:
+                raise UserError(f"{option} {item!r}: expected FLAG=VALUE")
+            try:
+                out[key] = yaml.safe_load(value)
+            except yaml.YAMLError:
+                raise UserError(f"{option} {item!r}: {value!r} is not a value") from None
+        return out
+
+    overrides = pairs("--set", args.set)
+    where = pairs("--where", args.where)
     seeds = None
     if args.seeds is not None:
         try:
@@ -85,6 +101,7 @@ def _sweep(args: argparse.Namespace) -> int:
         overrides=overrides,
         seeds=seeds,
         scenarios=args.scenario,
+        where=where,
     )
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / sweep.name
     if args.dry_run:

@@ -187,13 +187,16 @@ def load_sweep(
     overrides: dict[str, Any] | None = None,
     seeds: list[int] | None = None,
     scenarios: list[str] | None = None,
+    where: dict[str, Any] | None = None,
 ) -> Sweep:
     """Parse and validate a sweep file; the trials in a fixed order (setting-major, then seed).
 
     ``total_steps`` / ``episodes`` replace ``budget.total_steps`` / ``evaluation.episodes`` and
     ``overrides`` (flag -> value) are merged into ``fixed``; ``seeds`` / ``scenarios`` replace
     ``seeds`` / ``evaluation.scenarios``: a reduced run of a big sweep (the trial keys change
-    with them)."""
+    with them). ``where`` (flag -> value) keeps only the trials whose training flags have every
+    one of those values: a part of the sweep, e.g. one setting per core, with the same trial
+    keys as the whole."""
     source = Path(path)
     try:
         raw = yaml.safe_load(source.read_text(encoding="utf-8"))
@@ -328,4 +331,19 @@ def load_sweep(
             trials.append(
                 Trial(key, factor, label, seed, train_flags, agent, str(agent_file), evaluation)
             )
+    if where:
+        trials = _select(trials, where)
     return Sweep(name, source, agent, agent_file, trials, max_retries, float(cpus), evaluation)
+
+
+def _select(trials: list[Trial], where: dict[str, Any]) -> list[Trial]:
+    """The trials whose training flags match every ``flag: value`` of ``where``."""
+    for flag, value in where.items():
+        values = sorted({repr(t.train_flags[flag]) for t in trials if flag in t.train_flags})
+        if not values:
+            raise UserError(f"--where {flag}={value}: no trial of the sweep sets {flag}")
+        if not any(t.train_flags.get(flag) == value for t in trials):
+            raise UserError(
+                f"--where {flag}={value}: no trial has this value (its values: {', '.join(values)})"
+            )
+    return [t for t in trials if all(t.train_flags.get(k) == v for k, v in where.items())]

@@ -162,3 +162,33 @@ def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(tmp_path):
     assert t.evaluation["scenarios"] == [str((tmp_path / "scen" / "mine.yaml").resolve())]
     with pytest.raises(UserError, match="fixed: expected a mapping"):
         load_sweep(_edit(path, fixed=[1]))
+
+
+def test_where_selects_trials_with_the_whole_sweeps_keys():
+    """``--where`` runs a part of a sweep (one setting per core): the same trials, the same
+    keys, so ``--resume`` of the whole sweep later skips what the part landed."""
+    whole = load_sweep(REPO / "sweeps" / "table3.yaml")
+    part = load_sweep(REPO / "sweeps" / "table3.yaml", where={"ablation": "no-dpsc"})
+    assert [t.key for t in part.trials] == [
+        t.key for t in whole.trials if t.train_flags["ablation"] == "no-dpsc"
+    ]
+    assert len(part.trials) == 3
+    two = load_sweep(REPO / "sweeps" / "table3.yaml", where={"ablation": "no-dpsc", "seed": 2})
+    assert [t.seed for t in two.trials] == [2]
+    with pytest.raises(UserError, match="no trial has this value.*'no-diffusion'"):
+        load_sweep(REPO / "sweeps" / "table3.yaml", where={"ablation": "nope"})
+    with pytest.raises(UserError, match="no trial of the sweep sets widht"):
+        load_sweep(REPO / "sweeps" / "table3.yaml", where={"widht": 3})
+
+
+@pytest.mark.parametrize("arg", ["ablation", "ablation=[1", "ablation=nope"])
+def test_where_errors_from_the_cli(arg):
+    r = subprocess.run(
+        [sys.executable, "-m", "cdr_bench", "sweep", str(REPO / "sweeps" / "table3.yaml")]
+        + ["--dry-run", "--where", arg],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert r.returncode == 2 and "--where" in r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr
