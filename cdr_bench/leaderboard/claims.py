@@ -19,7 +19,9 @@ Table 2 agents and the Table 3 variants. Rules, decided before looking at the nu
   than a seed of the ablation (rliable's probability of improvement, every seed on the same
   episodes) has its 95 % stratified-bootstrap interval above 0.5; with one seed of either,
   when the complete method's success is significantly higher (the paired difference's interval
-  above 0). Either way at the budget both ran.
+  above 0). Either way at one budget: when the two entries' training logs give different
+  numbers of transitions, the claim is not measured (a 100k ablation beside a full-budget
+  complete method would judge the budget, not the component).
 * *DPSC reduces the convergence steps by about 14 %*: measured with three seeds or more of the
   complete method and of W/O DPSC, each with its fixed-set learning curve (``curve/`` lines of
   the trainers: the clean success of the greedy policy on 100 episodes of `high`). The target
@@ -136,6 +138,11 @@ def _seed_counts(e: Any, metric: str) -> tuple[Any, int]:
     return np.array(k, dtype=np.int64), ns.pop()
 
 
+def _transitions(b: Any) -> str:
+    """A training budget as text: ``1,374,560`` or ``100,000-1,374,560``."""
+    return "-".join(f"{int(x):,}" for x in b) if isinstance(b, list) else f"{int(b):,}"
+
+
 def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
 
@@ -185,13 +192,17 @@ def build_claims(
     latency: dict[str, float],
     sensitivity: dict[str, Any] | None = None,
     training: dict[str, list[tuple[Curve, int]]] | None = None,
+    budgets: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """``by_row``: published row -> Entry; ``paired.metric(a, b, sid, metric)``: the paired
     difference b - a; ``multimodal``: (entry, scenario) -> mean successful families;
     ``latency``: entry -> median ms per decision on :data:`SCENARIO`; ``sensitivity``: the
     Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it);
-    ``training``: entry -> ``(fixed-set curve, transitions)`` of each seed that logged one."""
+    ``training``: entry -> ``(fixed-set curve, transitions)`` of each seed that logged one;
+    ``budgets``: entry -> its training transitions (an int, ``[min, max]`` when its seeds
+    differ, ``None`` when unknown), which an ablation claim needs equal on both sides."""
     training = training or {}
+    budgets = budgets or {}
     out: list[dict[str, Any]] = []
 
     def add(cid: str, claim: str, source: str, published_text: str, measured: str,
@@ -349,6 +360,14 @@ def build_claims(
             add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
                 "§5.3.1, Table 3", pub_text, "-", NOT_MEASURED,
                 "no entry reproduces the row")  # fmt: skip
+            continue
+        bc, ba = budgets.get(comp.name), budgets.get(e.name)
+        if bc is not None and ba is not None and bc != ba:
+            add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
+                "§5.3.1, Table 3", pub_text,
+                f"{comp.name} trained for {_transitions(bc)} transitions, {e.name} for "
+                f"{_transitions(ba)}", NOT_MEASURED,
+                "Table 3 compares the variants at one training budget")  # fmt: skip
             continue
         if len(_runs(comp)) > 1 and len(_runs(e)) > 1:
             kc, n = _seed_counts(comp, "success_rate")

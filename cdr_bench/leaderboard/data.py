@@ -860,6 +860,7 @@ def build_data(
             },
             sensitivity,
             {e.name: _fixed_runs(e, info[e.name]) for e in entries},
+            {e.name: (info[e.name][0] or {}).get("transitions") for e in entries},
         ),
         "sensitivity": sensitivity,
         "tables": tables,

@@ -125,13 +125,15 @@ def _seeded_scenario(self: FakeEntry, sid: str) -> dict[str, Any]:
     return {"metrics": {"ownship": m}} if m else FakeEntry.scenario(self, sid)
 
 
-def _ablation_verdict(complete: list[int], ablated: list[int], monkeypatch) -> dict[str, Any]:
+def _ablation_verdict(
+    complete: list[int], ablated: list[int], monkeypatch, budgets: Any = None
+) -> dict[str, Any]:
     monkeypatch.setattr(FakeEntry, "scenario", _seeded_scenario, raising=True)
     by_row = {
         cl.COMPLETE: SeededEntry("diffusion-ac", complete),
         "W/O DPSC": SeededEntry("no-dpsc", ablated),
     }
-    out = cl.build_claims(by_row, FakePaired(), PUB, {}, {})
+    out = cl.build_claims(by_row, FakePaired(), PUB, {}, {}, None, None, budgets)
     return next(c for c in out if c["id"] == "ablation-W/O DPSC")
 
 
@@ -145,6 +147,20 @@ def test_ablation_over_seeds_held_only_when_every_seed_pair_separates(monkeypatc
     # success saturated (the same count everywhere): ties, P = 0.5
     tied = _ablation_verdict([999, 999, 999], [999, 999, 999], monkeypatch)
     assert tied["verdict"] == "not held" and "= 0.50 [0.50, 0.50]" in tied["measured"]
+
+
+def test_ablation_at_another_budget_is_not_measured(monkeypatch) -> None:
+    good, bad = [990, 992, 995, 991, 993], [900, 910, 880]
+    same = {"diffusion-ac": 1_374_560, "no-dpsc": 1_374_560}
+    assert _ablation_verdict(good, bad, monkeypatch, same)["verdict"] == "held"
+    mixed = _ablation_verdict(good, bad, monkeypatch, {**same, "no-dpsc": 100_000})
+    assert mixed["verdict"] == "not measured"
+    assert "1,374,560" in mixed["measured"] and "for 100,000" in mixed["measured"]
+    # seeds of one entry at different budgets never equal a single budget
+    spread = _ablation_verdict(good, bad, monkeypatch, {**same, "no-dpsc": [100_000, 1_374_560]})
+    assert spread["verdict"] == "not measured" and "100,000-1,374,560" in spread["measured"]
+    # unknown budgets (no training logs): judged as before
+    assert _ablation_verdict(good, bad, monkeypatch, {"no-dpsc": 100_000})["verdict"] == "held"
 
 
 def _curve(values: list[float], every: int = 50_000) -> list[list[float]]:
