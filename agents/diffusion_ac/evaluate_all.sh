@@ -7,8 +7,9 @@
 # With no argument all three parts run. Outputs (all deterministic for a given checkpoint):
 #   main       leaderboard/results/diffusion-ac.json|.jsonl (checkpoint.pt on the paper suite,
 #              1000 episodes each) and diffusion-ac.multimodal-<scenario>.json (Fig. 9)
-#   ablations  leaderboard/results/diffusion-ac-100k.json|.jsonl, diffusion-ac-no-<part>.*
-#              (ablations/<name>-100k.pt on the paper suite)
+#   ablations  leaderboard/results/diffusion-ac-no-<part>.json|.jsonl and .seed-<k>.* (the
+#              Table-3 ablations at the reference budget, ablations/<part>/ and its seeds/, on
+#              the paper suite; the complete method is the main entry)
 #   analysis   analysis/latency.json (cdr-bench latency)
 # The leaderboard build also re-renders the leaderboard and every results table in the docs
 # (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
@@ -24,9 +25,8 @@ for part in "${parts[@]}"; do
         main)
             "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac ;;
         ablations)
-            "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac-100k \
-                diffusion-ac-no-diffusion diffusion-ac-no-double-q diffusion-ac-no-dpsc \
-                diffusion-ac-no-value-guidance ;;
+            "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac-no-diffusion \
+                diffusion-ac-no-double-q diffusion-ac-no-dpsc diffusion-ac-no-value-guidance ;;
         analysis)
             "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Table 3 ablations of Diffusion-AC at an equal, short budget (BUDGET transitions each, seed 1),
-# plus the full method at the same budget, one after the other. Writes runs/abl-<name>/ and
+# plus the full method at the same budget, one after the other: the 100k runs of cdr-bench 0.3
+# (ablations/<name>-100k.*, kept for the history and the fast-policy tests). The leaderboard's
+# Table 3 is trained at the reference budget, three seeds each, by sweeps/table3.yaml. Writes runs/abl-<name>/ and
 # copies each checkpoint and training log to agents/diffusion_ac/ablations/<name>-<budget>.*
 # Usage: [PYTHON=.venv/bin/python] bash agents/diffusion_ac/train_ablations.sh [BUDGET [NAME ...]]
 # (default 100000 and all five)

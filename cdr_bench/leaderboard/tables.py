@@ -188,13 +188,13 @@ LEARNED = ("diffusion-ac", "ppo", "maskable-ppo", "td3", "safe-dqn-x", "rainbow"
 """Leaderboard entries of the learned agents shipped in ``agents/``."""
 CLASSICAL = ("direct", "random", "mvp")
 ABLATIONS = (
-    "diffusion-ac-100k",
+    "diffusion-ac",
     "diffusion-ac-no-diffusion",
     "diffusion-ac-no-double-q",
     "diffusion-ac-no-dpsc",
     "diffusion-ac-no-value-guidance",
 )
-"""Diffusion-AC's Table-3 ablations, the complete method at the same budget first."""
+"""Diffusion-AC's Table-3 ablations at the reference budget, the complete method first."""
 MULTIMODAL = ("diffusion-ac", "ppo", "ppo-sampled")
 DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
 """Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
