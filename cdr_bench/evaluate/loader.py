@@ -101,10 +101,16 @@ def file_sha256(p: Path) -> str:
     return h.hexdigest()
 
 
-def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
+_FROM_ENV = object()
+
+
+def agent_identity(path: str | os.PathLike[str], checkpoint: Any = _FROM_ENV) -> dict[str, Any]:
     """Path, name and SHA-256 of every file of the agent (relative names), plus one combined
-    hash over them (and over the checkpoint named by ``CDR_BENCH_CHECKPOINT``, when set):
-    identifies exactly what was scored."""
+    hash over them (and over the checkpoint override, when there is one): identifies exactly
+    what was scored. The override is ``checkpoint`` when given (a path, or ``None`` for none),
+    else the one named by ``CDR_BENCH_CHECKPOINT``. Given ``checkpoint`` (and an absolute
+    ``path``), the hash depends on no environment variable or working directory, so threads may
+    compute it for different agents at once (the leaderboard build's check does)."""
     f = resolve_agent_path(path)
     base = f.parent
     files = {p.relative_to(base).as_posix(): file_sha256(p) for p in agent_files(path)}
@@ -115,8 +121,9 @@ def agent_identity(path: str | os.PathLike[str]) -> dict[str, Any]:
         "entry": f.name,
         "files": files,
     }
-    override = os.environ.get(CHECKPOINT_ENV)
+    override = os.environ.get(CHECKPOINT_ENV) if checkpoint is _FROM_ENV else checkpoint
     if override:
+        override = os.fspath(override)
         ck = Path(override)
         if not ck.is_file():
             raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")

@@ -36,9 +36,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,7 +43,7 @@ from typing import Any
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import aggregate
 from cdr_bench.evaluate.compare import compare
-from cdr_bench.evaluate.loader import CHECKPOINT_ENV, agent_identity
+from cdr_bench.evaluate.loader import agent_identity
 from cdr_bench.evaluate.metrics import scenario_metrics
 from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
 from cdr_bench.evaluate.results import read_episodes, read_result
@@ -74,31 +71,14 @@ BASELINE = "mvp"
 TACTICAL_PREFIX = "tactical/"
 
 
-@contextmanager
-def _checkpoint_env(value: str | None) -> Iterator[None]:
-    old = os.environ.get(CHECKPOINT_ENV)
-    if value is None:
-        os.environ.pop(CHECKPOINT_ENV, None)
-    else:
-        os.environ[CHECKPOINT_ENV] = value
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop(CHECKPOINT_ENV, None)
-        else:
-            os.environ[CHECKPOINT_ENV] = old
-
-
 def current_identity(sub: Submission, root: Path) -> dict[str, Any]:
-    """The agent identity the evaluator records for this submission now (its files' hashes)."""
-    cwd = os.getcwd()
-    try:
-        os.chdir(root)
-        with _checkpoint_env(sub.checkpoint):
-            return agent_identity(sub.agent)
-    finally:
-        os.chdir(cwd)
+    """The agent identity the evaluator records for this submission now (its files' hashes;
+    the ``sha256`` is the evaluator's, the paths are absolute). Changes no working directory or
+    environment variable: the check calls it from two threads at once, and the earlier version
+    (chdir + ``CDR_BENCH_CHECKPOINT`` set and restored around the call) let one thread hash a
+    seed's agent with the other's checkpoint."""
+    ck = str(root / sub.checkpoint) if sub.checkpoint else None
+    return agent_identity(root / sub.agent, checkpoint=ck)
 
 
 @dataclass
