@@ -10,7 +10,10 @@
 #   ablations  leaderboard/results/diffusion-ac-no-<part>.json|.jsonl and .seed-<k>.* (the
 #              Table-3 ablations at the reference budget, ablations/<part>/ and its seeds/, on
 #              the paper suite; the complete method is the main entry)
-#   analysis   analysis/latency.json (cdr-bench latency)
+#   analysis   analysis/latency.json (cdr-bench latency), and analysis/sample-target/: the
+#              reference-budget run of --diffusion-target sample (sweeps/dac-sample.yaml, staged
+#              in sweeps/landed/dac-sample/) on the paper suite (result.json|.jsonl) and its
+#              multimodality on the tactical families (multimodal-<scenario>.json|.png)
 # The leaderboard build also re-renders the leaderboard and every results table in the docs
 # (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
 set -euo pipefail
@@ -28,7 +31,16 @@ for part in "${parts[@]}"; do
             "$py" -m cdr_bench leaderboard build --evaluate diffusion-ac-no-diffusion \
                 diffusion-ac-no-double-q diffusion-ac-no-dpsc diffusion-ac-no-value-guidance ;;
         analysis)
-            "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json ;;
+            "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json
+            st=$ag/analysis/sample-target
+            ck=$(ls sweeps/landed/dac-sample/*/checkpoint.pt)
+            CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag --no-progress --force \
+                --out $st/result.json
+            for sc in head-on crossing overtaking; do
+                CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench multimodal $ag --search \
+                    --scenario tactical/$sc --out $st/multimodal-tactical_$sc.json
+            done
+            "$py" -m cdr_bench leaderboard render-docs ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;
     esac
 done

@@ -155,6 +155,22 @@ def multimodality(repo: Repo, entries: Iterable[str]) -> str:
     return report.multimodality_table([run for n in entries for run in repo.multimodal(n)])
 
 
+def analysis_runs(
+    repo: Repo, folder: str, label: str, multimodal: Sequence[str]
+) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
+    """An agent's analysis run outside the leaderboard: ``<folder>/result.json`` (written by
+    ``cdr-bench evaluate --out``) and, per scenario of ``multimodal``,
+    ``<folder>/multimodal-<scenario>.json`` (``cdr-bench multimodal --out``); returns
+    ``(result, [(label, multimodality JSON), ...])``."""
+    d = repo.root / folder
+    try:
+        res = read_result(d / "result.json")
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    mm = [(label, _read_json(d / f"multimodal-{sc.replace('/', '_')}.json")) for sc in multimodal]
+    return res, mm
+
+
 def latency(repo: Repo, entries: Iterable[str]) -> str:
     return report.latency_table([(repo.label(n), repo.latency(n)) for n in entries])
 
@@ -196,6 +212,9 @@ ABLATIONS = (
 )
 """Diffusion-AC's Table-3 ablations at the reference budget, the complete method first."""
 MULTIMODAL = ("diffusion-ac", "ppo", "ppo-sampled")
+SAMPLE_TARGET = ("agents/diffusion_ac/analysis/sample-target", "Diffusion-AC, sample target")
+"""The reference-budget run of ``--diffusion-target sample`` (seed 1; not a leaderboard entry)."""
+TACTICAL = ("tactical/head-on", "tactical/crossing", "tactical/overtaking")
 DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
 """Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
 
@@ -239,7 +258,15 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
         "design-runs": lambda r: quick_evals(
             r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl") for n in DESIGN_RUNS], "high"
         ),
-        "multimodality": lambda r: multimodality(r, ["diffusion-ac"]),
+        "multimodality": lambda r: report.multimodality_table(
+            [*r.multimodal("diffusion-ac"), *analysis_runs(r, *SAMPLE_TARGET, TACTICAL)[1]]
+        ),
+        "sample-target": lambda r: report.measured_table(
+            [
+                (f"{r.label('diffusion-ac')}, teacher target", r.result("diffusion-ac"), []),
+                (SAMPLE_TARGET[1], analysis_runs(r, *SAMPLE_TARGET, TACTICAL)[0], []),
+            ]
+        ),
         "latency": lambda r: report.latency_detail_table(r.latency("diffusion-ac")),
     },
 }

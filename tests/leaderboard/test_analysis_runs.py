@@ -1,0 +1,65 @@
+"""The analysis runs that the documentation shows beside the leaderboard entries
+(``tables.SAMPLE_TARGET``: the reference-budget run of ``--diffusion-target sample``). They are
+not leaderboard entries, so the leaderboard check does not re-score them; these tests tie each
+to the checkpoint it scored and to the episodes of the entry it is compared with."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from cdr_bench.errors import UserError
+from cdr_bench.evaluate.loader import file_sha256
+from cdr_bench.leaderboard import tables
+from tests.leaderboard.conftest import ROOT
+
+LB = ROOT / "leaderboard"
+
+
+def test_sample_target_scored_the_staged_sample_target_checkpoint() -> None:
+    res, mm = tables.analysis_runs(tables.Repo(LB), *tables.SAMPLE_TARGET, tables.TACTICAL)
+    ck = res["agent"]["checkpoint_override"]
+    path = ROOT / ck["path"]
+    assert path.parent.parent == ROOT / "sweeps" / "landed" / "dac-sample", ck["path"]
+    assert file_sha256(path) == ck["sha256"]
+    trial = json.loads((path.parent / "trial.json").read_text(encoding="utf-8"))
+    assert trial["train_flags"]["diffusion-target"] == "sample"
+    assert trial["train_flags"]["total-steps"] == 1374560  # the reference budget
+    # the same agent code as the entry it is compared with, on the same episodes
+    entry = json.loads((LB / "results" / "diffusion-ac.json").read_text(encoding="utf-8"))
+    assert res["agent"]["files"].keys() == entry["agent"]["files"].keys()
+    assert (res["suite"], res["base_seed"], res["batch_size"]) == (
+        entry["suite"],
+        entry["base_seed"],
+        entry["batch_size"],
+    )
+    assert [s["id"] for s in res["scenarios"]] == [s["id"] for s in entry["scenarios"]]
+    assert [m["scenario"] for _, m in mm] == list(tables.TACTICAL)
+    for _, m in mm:
+        base = json.loads(
+            tables.multimodal_path(LB / "results", "diffusion-ac", m["scenario"]).read_text()
+        )
+        assert (m["episodes"], m["samples"], m["seed"]) == (
+            base["episodes"],
+            base["samples"],
+            base["seed"],
+        )
+        assert "feasible_families_mean" in m  # searched, as the entry's
+
+
+def test_a_missing_analysis_file_is_an_error_naming_it(tmp_path: Path) -> None:
+    folder = "agents/diffusion_ac/analysis/sample-target"
+    repo = tmp_path / "repo"
+    shutil.copytree(LB, repo / "leaderboard")
+    (repo / folder).mkdir(parents=True)
+    r = tables.Repo(repo / "leaderboard")
+    with pytest.raises(UserError, match="sample-target/result.json: no such result file"):
+        tables.analysis_runs(r, folder, "x", tables.TACTICAL)
+    src = ROOT / folder
+    for name in ("result.json", "result.jsonl"):
+        shutil.copy(src / name, repo / folder / name)
+    with pytest.raises(UserError, match="multimodal-tactical_head-on.json: cannot read"):
+        tables.analysis_runs(r, folder, "x", tables.TACTICAL)
