@@ -33,7 +33,7 @@ for part in "${parts[@]}"; do
         analysis)
             "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json
             st=$ag/analysis/sample-target
-            ck=$(ls sweeps/landed/dac-sample/*/checkpoint.pt)
+            ck=sweeps/landed/dac-sample/ab0ea5d749fdcfa2/checkpoint.pt  # its one trial
             CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag --no-progress --force \
                 --out $st/result.json
             for sc in head-on crossing overtaking; do

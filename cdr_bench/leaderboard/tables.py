@@ -79,6 +79,7 @@ class Repo:
         self.root = self.lb_dir.resolve().parent
         self.results_dir = self.lb_dir / "results"
         self._results: dict[str, dict[str, Any]] = {}
+        self._analysis: dict[tuple[str, str, tuple[str, ...]], Any] = {}
 
     @cached_property
     def published(self) -> Published:
@@ -132,6 +133,27 @@ class Repo:
         p = self.root / self.submission(name).agent
         return p if p.is_dir() else p.parent
 
+    def analysis(
+        self, folder: str, label: str, multimodal: Sequence[str]
+    ) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
+        """An agent's analysis run outside the leaderboard: ``<folder>/result.json`` (written
+        by ``cdr-bench evaluate --out``) and, per scenario of ``multimodal``,
+        ``<folder>/multimodal-<scenario>.json`` (``cdr-bench multimodal --out``); returns
+        ``(result, [(label, multimodality JSON), ...])``."""
+        key = (folder, label, tuple(multimodal))
+        if key not in self._analysis:
+            d = self.root / folder
+            try:
+                res = read_result(d / "result.json")
+            except ValueError as e:
+                raise UserError(str(e)) from None
+            mm = [
+                (label, _read_json(d / f"multimodal-{sc.replace('/', '_')}.json"))
+                for sc in multimodal
+            ]
+            self._analysis[key] = (res, mm)
+        return self._analysis[key]
+
     def latency(self, name: str) -> dict[str, Any]:
         """``<agent folder>/analysis/latency.json`` (written by ``cdr-bench latency``)."""
         data: dict[str, Any] = _read_json(self.agent_dir(name) / "analysis" / "latency.json")
@@ -153,22 +175,6 @@ def measured(
 
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
     return report.multimodality_table([run for n in entries for run in repo.multimodal(n)])
-
-
-def analysis_runs(
-    repo: Repo, folder: str, label: str, multimodal: Sequence[str]
-) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
-    """An agent's analysis run outside the leaderboard: ``<folder>/result.json`` (written by
-    ``cdr-bench evaluate --out``) and, per scenario of ``multimodal``,
-    ``<folder>/multimodal-<scenario>.json`` (``cdr-bench multimodal --out``); returns
-    ``(result, [(label, multimodality JSON), ...])``."""
-    d = repo.root / folder
-    try:
-        res = read_result(d / "result.json")
-    except ValueError as e:
-        raise UserError(str(e)) from None
-    mm = [(label, _read_json(d / f"multimodal-{sc.replace('/', '_')}.json")) for sc in multimodal]
-    return res, mm
 
 
 def latency(repo: Repo, entries: Iterable[str]) -> str:
@@ -259,12 +265,12 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
             r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl") for n in DESIGN_RUNS], "high"
         ),
         "multimodality": lambda r: report.multimodality_table(
-            [*r.multimodal("diffusion-ac"), *analysis_runs(r, *SAMPLE_TARGET, TACTICAL)[1]]
+            [*r.multimodal("diffusion-ac"), *r.analysis(*SAMPLE_TARGET, TACTICAL)[1]]
         ),
         "sample-target": lambda r: report.measured_table(
             [
                 (f"{r.label('diffusion-ac')}, teacher target", r.result("diffusion-ac"), []),
-                (SAMPLE_TARGET[1], analysis_runs(r, *SAMPLE_TARGET, TACTICAL)[0], []),
+                (SAMPLE_TARGET[1], r.analysis(*SAMPLE_TARGET, TACTICAL)[0], []),
             ]
         ),
         "latency": lambda r: report.latency_detail_table(r.latency("diffusion-ac")),

@@ -20,7 +20,7 @@ LB = ROOT / "leaderboard"
 
 
 def test_sample_target_scored_the_staged_sample_target_checkpoint() -> None:
-    res, mm = tables.analysis_runs(tables.Repo(LB), *tables.SAMPLE_TARGET, tables.TACTICAL)
+    res, mm = tables.Repo(LB).analysis(*tables.SAMPLE_TARGET, tables.TACTICAL)
     ck = res["agent"]["checkpoint_override"]
     path = ROOT / ck["path"]
     assert path.parent.parent == ROOT / "sweeps" / "landed" / "dac-sample", ck["path"]
@@ -57,9 +57,9 @@ def test_a_missing_analysis_file_is_an_error_naming_it(tmp_path: Path) -> None:
     (repo / folder).mkdir(parents=True)
     r = tables.Repo(repo / "leaderboard")
     with pytest.raises(UserError, match="sample-target/result.json: no such result file"):
-        tables.analysis_runs(r, folder, "x", tables.TACTICAL)
+        r.analysis(folder, "x", tables.TACTICAL)
     src = ROOT / folder
     for name in ("result.json", "result.jsonl"):
         shutil.copy(src / name, repo / folder / name)
     with pytest.raises(UserError, match="multimodal-tactical_head-on.json: cannot read"):
-        tables.analysis_runs(r, folder, "x", tables.TACTICAL)
+        r.analysis(folder, "x", tables.TACTICAL)
