@@ -1,13 +1,15 @@
 """What a Diffusion-AC training log says about its last curriculum stage (issue 16, item 5).
 
     python sweeps/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
-        agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5]
+        agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5] [--q-above 1.5]
 
 For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it prints:
 
 * when the stage was reached (transitions);
 * the rolling training success (``charts/success_rolling``): minimum, mean, and maximum;
 * the collapse windows, the stretches of lines whose rolling success is below ``--below``;
+* the overestimation windows, the stretches of lines whose largest Q is above ``--q-above``
+  (1.5), each with its peak, the lowest rolling success and the largest timeout share in it;
 * the critic's extremes with the step where each occurs: the TD loss (``losses/loss_q``), the
   mean Q of the sampled actions (``losses/q_mean``), the largest Q (``losses/q_max``) and the
   largest TD target (``losses/target_max``; the last two only in logs that carry them);
@@ -45,27 +47,41 @@ def _extreme(rows: list[dict], key: str) -> str:
     return f"{v:+.2f} at {step:,}"
 
 
-def summarise(path: Path, stage: int, below: float) -> str:
+def _windows(rows: list[dict], inside) -> list[list[dict]]:
+    """The maximal stretches of consecutive ``rows`` for which ``inside(row)`` holds."""
+    out: list[list[dict]] = []
+    run: list[dict] = []
+    for r in rows:
+        if inside(r):
+            run.append(r)
+        elif run:
+            out.append(run)
+            run = []
+    if run:
+        out.append(run)
+    return out
+
+
+def summarise(path: Path, stage: int, below: float, q_above: float = 1.5) -> str:
     rows = _lines(path)
     train = [r for r in rows if "step" in r and r.get("curriculum/stage") == stage]
     if not train:
         return f"{path}: no line at stage {stage}"
     first = train[0]["step"]
     succ = [r["charts/success_rolling"] for r in train]
-    windows: list[tuple[int, int, float]] = []
-    start = None
-    low = 1.0
-    for r in train:
-        s = r["charts/success_rolling"]
-        if s < below:
-            start = r["step"] if start is None else start
-            low = min(low, s)
-            end = r["step"]
-        elif start is not None:
-            windows.append((start, end, low))
-            start, low = None, 1.0
-    if start is not None:
-        windows.append((start, end, low))
+    windows = [
+        (w[0]["step"], w[-1]["step"], min(r["charts/success_rolling"] for r in w))
+        for w in _windows(train, lambda r: r["charts/success_rolling"] < below)
+    ]
+    over = []
+    for w in _windows(train, lambda r: r.get("losses/q_max", float("-inf")) > q_above):
+        peak = max(w, key=lambda r: r["losses/q_max"])
+        over.append(
+            f"{w[0]['step']:,}-{w[-1]['step']:,} (peak {peak['losses/q_max']:+.2f} at "
+            f"{peak['step']:,}, rolling success min "
+            f"{min(r['charts/success_rolling'] for r in w):.2f}, timeout share max "
+            f"{max(r.get('charts/timeout', 0.0) for r in w):.2f})"
+        )
     reached = rows[-1].get("final", {}).get("step", train[-1]["step"])
     out = [
         f"{path}",
@@ -80,6 +96,7 @@ def summarise(path: Path, stage: int, below: float) -> str:
         f"{_extreme(train, 'losses/q_mean')}; max Q {_extreme(train, 'losses/q_max')}; "
         f"max TD target {_extreme(train, 'losses/target_max')}",
         f"  max timeout share {_extreme(train, 'charts/timeout')}",
+        f"  largest Q above {q_above:+.2f}: {'; '.join(over) or 'never'}",
     ]
     curve = [r for r in rows if "curve/clean_success" in r and r["step"] >= first]
     if curve:
@@ -97,13 +114,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("logs", nargs="+", type=Path, help="training_log.jsonl / log.jsonl files")
     ap.add_argument("--stage", type=int, default=12, help="curriculum stage (12)")
     ap.add_argument("--below", type=float, default=0.5, help="collapse threshold (0.5)")
+    ap.add_argument(
+        "--q-above", type=float, default=1.5, help="overestimation threshold of the largest Q (1.5)"
+    )
     a = ap.parse_args(argv)
     for p in a.logs:
         if not p.is_file():
             print(f"error: {p}: no such file", file=sys.stderr)
             return 2
         try:
-            print(summarise(p, a.stage, a.below))
+            print(summarise(p, a.stage, a.below, a.q_above))
         except (json.JSONDecodeError, KeyError, TypeError) as e:
             print(f"error: {p}: not a training log ({e})", file=sys.stderr)
             return 2

@@ -51,3 +51,29 @@ def test_bad_input_is_one_line_error(tmp_path: Path, capsys) -> None:
     assert mod.main([str(bad)]) == 2
     err = capsys.readouterr().err
     assert "no such file" in err and "not a training log" in err
+
+
+def test_overestimation_windows(tmp_path: Path) -> None:
+    """Stretches of lines whose largest Q exceeds ``--q-above``: peak, lowest rolling success
+    and largest timeout share of each; "never" when the critic stays bounded."""
+    q = [1.1, 2.0, 9.0, 1.2, 1.0, 4.0]
+    lines = [
+        {
+            "step": 100 * (i + 1),
+            "curriculum/stage": 12,
+            "charts/success_rolling": 0.9 - 0.1 * i,
+            "charts/timeout": 0.01 * i,
+            "losses/q_max": v,
+        }
+        for i, v in enumerate(q)
+    ]
+    log = tmp_path / "log.jsonl"
+    log.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    mod = _module()
+    out = mod.summarise(log, 12, 0.5, 1.5)
+    assert (
+        "largest Q above +1.50: 200-300 (peak +9.00 at 300, rolling success min 0.70, "
+        "timeout share max 0.02); 600-600 (peak +4.00 at 600, rolling success min 0.40, "
+        "timeout share max 0.05)"
+    ) in out
+    assert "largest Q above +10.00: never" in mod.summarise(log, 12, 0.5, 10.0)
