@@ -87,7 +87,8 @@ def summarise(path: Path, stage: int, below: float, q_above: float = 1.5) -> str
         f"{path}",
         f"  stage {stage} from {first:,} to {reached:,} transitions ({len(train)} log lines)",
         f"  rolling success min {min(succ):.2f}  mean {sum(succ) / len(succ):.2f}  "
-        f"max {max(succ):.2f}",
+        f"max {max(succ):.2f}  (min after the stage's first line, the window at promotion: "
+        f"{min(succ[1:] or succ):.2f})",
         "  below {:.2f}: {}".format(
             below,
             "; ".join(f"{a:,}-{b:,} (min {m:.2f})" for a, b, m in windows) or "never",

@@ -77,3 +77,18 @@ def test_overestimation_windows(tmp_path: Path) -> None:
         "timeout share max 0.05)"
     ) in out
     assert "largest Q above +10.00: never" in mod.summarise(log, 12, 0.5, 10.0)
+
+
+def test_min_after_promotion_line(tmp_path: Path) -> None:
+    """The rolling window restarts at promotion, so the stage's first line can read 0.00 on a
+    run that never faltered: the minimum without it is printed beside the plain one."""
+    rolling = [0.0, 0.8, 0.75, 0.9]
+    lines = [
+        {"step": 100 * (i + 1), "curriculum/stage": 12, "charts/success_rolling": s}
+        for i, s in enumerate(rolling)
+    ]
+    log = tmp_path / "log.jsonl"
+    log.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    out = _module().summarise(log, 12, 0.5)
+    assert "rolling success min 0.00  mean 0.61  max 0.90" in out
+    assert "window at promotion: 0.75)" in out
