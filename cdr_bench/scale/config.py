@@ -116,7 +116,7 @@ def _sha256_file(path: Path) -> str:
 
 
 def _err(source: Path, where: str, msg: str) -> UserError:
-    return UserError(f"{source}: {where}: {msg}")
+    return UserError(f"{source}: {where or 'top level'}: {msg}")
 
 
 def _mapping(source: Path, where: str, value: Any, allowed: set[str] | None) -> dict[str, Any]:

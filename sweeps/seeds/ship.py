@@ -116,11 +116,16 @@ def main(argv: list[str] | None = None) -> int:
     if into.is_absolute() or ".." in into.parts:
         print(f"error: --into {a.into!r}: expected a path inside the agent folder", file=sys.stderr)
         return 2
-    if a.stage and a.sweep_dir.is_dir():
+    if not a.sweep_dir.is_dir():
+        print(f"error: {a.sweep_dir}: not a folder (expected a `cdr-bench sweep` output folder)",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    if a.stage:
         return stage(a.sweep_dir)
-    if a.agent_dir is None or not a.sweep_dir.is_dir() or not (a.agent_dir / "agent.py").is_file():
+    if a.agent_dir is None or not (a.agent_dir / "agent.py").is_file():
         print(
-            f"error: {a.sweep_dir} is not a folder or {a.agent_dir} has no agent.py",
+            f"error: {a.agent_dir or 'agent_dir'}: expected an agent folder holding agent.py "
+            "(or use --stage)",
             file=sys.stderr,
         )
         return 2

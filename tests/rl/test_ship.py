@@ -86,3 +86,15 @@ def test_ship_one_setting_into_a_subfolder_keeps_the_other_settings_staged(
     assert not (agent / "ablations" / "all").exists()
     assert ship.main([str(sweep), str(agent), "--into", "../elsewhere"]) == 2
     assert ship.main([str(sweep), str(agent), "--where", "ablation"]) == 2
+
+
+def test_bad_arguments_are_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ship = sweep_script("seeds/ship")
+    assert ship.main([str(tmp_path / "missing"), "--stage"]) == 2
+    assert "missing: not a folder (expected a `cdr-bench sweep` output folder)" in (
+        capsys.readouterr().err
+    )
+    assert ship.main([str(tmp_path)]) == 2
+    assert "agent_dir: expected an agent folder holding agent.py" in capsys.readouterr().err
+    assert ship.main([str(tmp_path), str(tmp_path)]) == 2
+    assert f"{tmp_path}: expected an agent folder holding agent.py" in capsys.readouterr().err

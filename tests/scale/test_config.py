@@ -162,6 +162,9 @@ def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(tmp_path):
     assert t.evaluation["scenarios"] == [str((tmp_path / "scen" / "mine.yaml").resolve())]
     with pytest.raises(UserError, match="fixed: expected a mapping"):
         load_sweep(_edit(path, fixed=[1]))
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(UserError, match=r"list\.yaml: top level: expected a mapping, got list"):
+        load_sweep(tmp_path / "list.yaml")
 
 
 def test_where_selects_trials_with_the_whole_sweeps_keys():
