@@ -19,6 +19,8 @@ import subprocess
 import sys
 import tempfile
 
+from _checkout import positive_int
+
 _PROBE = """
 import json, time
 t0 = time.perf_counter()
@@ -44,7 +46,7 @@ def _probe(cache_dir: str) -> dict[str, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=positive_int, default=3)
     args = ap.parse_args()
     cold, warm = [], []
     for _ in range(args.runs):

@@ -33,6 +33,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
 from _checkout import checkout as _checkout  # noqa: E402
+from _checkout import positive_int  # noqa: E402
 
 
 def _worker(args: argparse.Namespace) -> None:
@@ -123,11 +124,15 @@ def _measure(args: argparse.Namespace, code: str | None) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference", default="9145d86", help="commit to compare with, or 'none'")
-    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--rounds", type=positive_int, default=5)
     ap.add_argument("--scenario", default="high")
-    ap.add_argument("--steps", type=int, default=5000, help="PettingZoo steps per measurement")
-    ap.add_argument("--batched-steps", type=int, default=100, help="batched steps per measurement")
-    ap.add_argument("--batch", type=int, default=256, help="episodes of the batched env")
+    ap.add_argument(
+        "--steps", type=positive_int, default=5000, help="PettingZoo steps per measurement"
+    )
+    ap.add_argument(
+        "--batched-steps", type=positive_int, default=100, help="batched steps per measurement"
+    )
+    ap.add_argument("--batch", type=positive_int, default=256, help="episodes of the batched env")
     ap.add_argument("--cpu", type=int, default=0, help="CPU every measurement is pinned to")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--code", default=None, help=argparse.SUPPRESS)

@@ -32,6 +32,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
 from _checkout import checkout as _checkout  # noqa: E402
+from _checkout import positive_int  # noqa: E402
 
 # Runs the CLI of the checkout at argv[1] (bypassing the editable install of the current one).
 _LAUNCH = (
@@ -68,8 +69,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--reference", default="06fc59b")
     p.add_argument("--agents", nargs="+", default=["mvp", "diffusion_ac"])
-    p.add_argument("--episodes", type=int, default=200)
-    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--episodes", type=positive_int, default=200)
+    p.add_argument("--rounds", type=positive_int, default=3)
     p.add_argument("--cpu", type=int, default=1, help="CPU to pin to (-1: no pinning)")
     args = p.parse_args()
     if args.cpu is not None and args.cpu < 0:

@@ -32,6 +32,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
 from _checkout import checkout as _checkout  # noqa: E402
+from _checkout import positive_int  # noqa: E402
 
 # Imports the package of the checkout at argv[1] (bypassing the editable install of the current
 # one), renders its leaderboard, prints the seconds and whether the pages equal the committed.
@@ -67,7 +68,7 @@ def _render(code: Path, cpu: int | None) -> dict[str, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reference", default="5e4a965", help="commit, or 'none'")
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=positive_int, default=3)
     ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU")
     args = ap.parse_args()
     ref = None if args.reference == "none" else Path(_checkout(args.reference))

@@ -59,6 +59,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
 from _checkout import checkout as _checkout  # noqa: E402
+from _checkout import positive_int  # noqa: E402
 
 ALGORITHMS: dict[str, tuple[str, dict[str, Any]]] = {
     # module, flags of the shipped reference run that are not the defaults
@@ -240,12 +241,16 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--reference", default="70fce2e")
     p.add_argument("--algorithms", nargs="+", default=list(ALGORITHMS), choices=list(ALGORITHMS))
-    p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--transitions", type=int, default=4000, help="measured transitions per run")
+    p.add_argument("--rounds", type=positive_int, default=3)
+    p.add_argument(
+        "--transitions", type=positive_int, default=4000, help="measured transitions per run"
+    )
     p.add_argument(
         "--warmup", type=int, default=1000, help="transitions after learning_starts not measured"
     )
-    p.add_argument("--threads", type=int, default=1, help="torch threads (the trainers' flag)")
+    p.add_argument(
+        "--threads", type=positive_int, default=1, help="torch threads (the trainers' flag)"
+    )
     p.add_argument("--json", help="also write every measurement here")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--algorithm", help=argparse.SUPPRESS)
