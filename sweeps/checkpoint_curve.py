@@ -35,10 +35,18 @@ def load_agent_class(agent_dir: Path):
 
 
 def checkpoint_step(path: Path) -> int:
+    """The step recorded in a trainer's checkpoint; anything else is a one-line error."""
     import torch
 
-    meta = torch.load(path, map_location="cpu", weights_only=True).get("meta", {})
-    return int(meta.get("step", -1))
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=True)
+        meta = ck.get("meta", {}) if isinstance(ck, dict) else None
+        if not isinstance(meta, dict):
+            raise ValueError("no 'meta' mapping")
+        return int(meta.get("step", -1))
+    except Exception as e:  # noqa: BLE001 - any unreadable file is the same user error
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise SystemExit(f"error: {path}: not a cdr-bench training checkpoint ({msg})") from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     agent_cls = load_agent_class(a.agent_dir)
     for step, path in sorted((checkpoint_step(p), p) for p in a.checkpoints):
-        agent = agent_cls(checkpoint=str(path))
+        try:
+            agent = agent_cls(checkpoint=str(path))
+        except Exception as e:  # noqa: BLE001 - e.g. another algorithm's checkpoint
+            print(f"error: {path}: {a.agent_dir}/agent.py cannot load it ({e})", file=sys.stderr)
+            return 2
         r = quick_eval(agent.act_batch, CURVE_SCENARIO, a.episodes, seed=CURVE_SEED)
         row = {"step": step, "checkpoint": str(path)}
         row.update({f"curve/{k}": v for k, v in r.items() if k not in ("scenario", "episodes")})

@@ -6,6 +6,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 from cdr_bench.rl.common import CURVE_SCENARIO, CURVE_SEED
 from cdr_bench.rl.quick_eval import quick_eval
 
@@ -44,3 +46,14 @@ def test_bad_paths_are_errors(tmp_path: Path, capsys) -> None:
     assert mod.main([str(AGENT), str(tmp_path / "none.pt")]) == 2
     err = capsys.readouterr().err
     assert "no agent.py" in err and "no such checkpoint" in err
+
+
+def test_unreadable_or_foreign_checkpoints_are_one_line_errors(tmp_path: Path, capsys) -> None:
+    mod = _module()
+    junk = tmp_path / "junk.pt"
+    junk.write_text("not a checkpoint\n")
+    with pytest.raises(SystemExit, match=r"junk\.pt: not a cdr-bench training checkpoint"):
+        mod.main([str(AGENT), str(junk)])
+    foreign = ROOT / "agents" / "ppo" / "checkpoint.pt"  # another algorithm's weights
+    assert mod.main([str(AGENT), str(foreign), "--episodes", "2"]) == 2
+    assert "agents/safe_dqn_x/agent.py cannot load it" in capsys.readouterr().err
