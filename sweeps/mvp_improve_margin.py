@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -35,8 +36,12 @@ def _load(checkpoint: Path) -> dict:
 
     if not checkpoint.is_file():
         raise SystemExit(f"{checkpoint}: no such checkpoint")
-    ck = torch.load(checkpoint, map_location="cpu", weights_only=True)
-    if ck["config"].get("rule") != "mvp-improve":
+    try:
+        ck = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - any unreadable file is the same user error
+        raise SystemExit(f"{checkpoint}: not a training checkpoint ({type(e).__name__})") from None
+    config = ck.get("config") if isinstance(ck, dict) else None
+    if not isinstance(config, dict) or config.get("rule") != "mvp-improve":
         raise SystemExit(f"{checkpoint}: not trained with --combine mvp-improve")
     return ck
 
@@ -82,6 +87,11 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if (a.slack is None) == (a.set is None):
         p.error("give either --slack (compare margins) or --set (write one)")
+    if a.episodes < 1 or a.seed < 0:
+        p.error("--episodes must be >= 1 and --seed >= 0")
+    margins = [*(a.slack or []), *([] if a.set is None else [a.set])]
+    if any(not math.isfinite(x) or x < 0 for x in margins):
+        p.error("margins (--slack, --set) must be finite and >= 0")
     if a.set is not None:
         loaded = [(path, _load(path)) for path in a.checkpoint]  # all checked before any write
         for path, ck in loaded:

@@ -89,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--total-steps", type=int, default=TOTAL, help="%(default)s")
     p.add_argument("--no-evaluate", action="store_true", help="skip the scoring on high")
     a, extra = p.parse_known_args(argv)  # other flags go to `cdr-bench train rainbow`
+    if a.total_steps < 1 or a.seed < 0:
+        p.error("--total-steps must be >= 1 and --seed >= 0")
+    if any(not 0 < r < a.total_steps for r in a.resets) or a.resets != sorted(set(a.resets)):
+        p.error(f"--resets must increase and lie between 0 and --total-steps ({a.total_steps})")
     run: Path = a.run_dir
     run.mkdir(parents=True, exist_ok=True)
     record = run / "resets.json"

@@ -177,6 +177,14 @@ def test_margin_written_in_place_only_into_mvp_improve_checkpoints(improve_run, 
         assert torch.equal(v, new["state_dict"][k])
     with pytest.raises(SystemExit):
         margin.main([str(a)])  # neither --slack nor --set
+    junk = tmp_path / "junk.pt"
+    junk.write_text("not a checkpoint\n")
+    with pytest.raises(SystemExit, match=r"junk\.pt: not a training checkpoint"):
+        margin.main(["--set", "0.3", str(junk)])
+    for bad in (["--set", "nan"], ["--set", "-0.1"], ["--slack", "0", "inf"]):
+        with pytest.raises(SystemExit):
+            margin.main([*bad, str(a)])
+    assert torch.load(a, weights_only=True)["config"]["slack"] == 0.3  # nothing written
 
 
 # --- further steps: policy iteration on mvp (--base-policy) ------------------------------------

@@ -51,3 +51,13 @@ def test_empty_replay_keeps_everything_else(tmp_path):
     for part in ("net", "target"):
         for k, v in before["learner"][part].items():
             assert torch.equal(v, after["learner"][part][k]), (part, k)
+
+
+@pytest.mark.parametrize(
+    "flags", [["--total-steps", "-5"], ["--resets", "300", "200"], ["--resets", "0"]]
+)
+def test_bad_budgets_are_refused_before_anything_runs(tmp_path, flags):
+    with pytest.raises(SystemExit) as e:
+        rrr.main([str(tmp_path / "run"), "--no-evaluate", *flags])
+    assert e.value.code == 2
+    assert not (tmp_path / "run").exists()
