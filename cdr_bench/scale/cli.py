@@ -103,6 +103,14 @@ def _sweep(args: argparse.Namespace) -> int:
         scenarios=args.scenario,
         where=where,
     )
+    if args.num_cpus is not None and args.address is None:
+        if args.num_cpus < 1:
+            raise UserError(f"--num-cpus {args.num_cpus}: expected a whole number >= 1")
+        if args.num_cpus < sweep.num_cpus_per_trial:  # Ray would wait for ever
+            raise UserError(
+                f"--num-cpus {args.num_cpus}: fewer than the {sweep.num_cpus_per_trial:g} CPUs "
+                f"each trial of {args.sweep} asks for (num_cpus_per_trial)"
+            )
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / sweep.name
     if args.dry_run:
         for t in sweep.trials:

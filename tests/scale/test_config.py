@@ -103,6 +103,25 @@ def test_smoke_sweep_dry_run():
     assert "4 trials" in r.stdout
 
 
+@pytest.mark.parametrize(
+    ("cpus", "words"),
+    [("0", "expected a whole number >= 1"), ("1", "fewer than the 2 CPUs each trial")],
+)
+def test_num_cpus_that_could_never_run_a_trial_is_refused(tmp_path, cpus, words):
+    """A local Ray with no CPU, or fewer than a trial asks for, would wait for ever."""
+    path = _edit(tiny_sweep(tmp_path, [1]), num_cpus_per_trial=2)
+    r = subprocess.run(
+        [sys.executable, "-m", "cdr_bench", "sweep", str(path), "--num-cpus", cpus],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"--num-cpus {cpus}: {words}" in r.stderr
+    assert not (tmp_path / "runs").exists()
+
+
 def test_cli_error_is_one_line(tmp_path):
     path = _edit(tiny_sweep(tmp_path, [1]), bogus=1)
     r = subprocess.run(
