@@ -26,6 +26,14 @@ TRAINERS: dict[str, str] = {
 JSON summary)."""
 
 
+def args_class(name: str) -> type:
+    """The dataclass of the flags of ``cdr-bench train NAME`` (its ``__post_init__`` checks the
+    flags that depend on each other)."""
+    module = importlib.import_module(TRAINERS[name])
+    algorithm = getattr(module, "ALGORITHM", None)
+    return algorithm.args if algorithm is not None else module.Args  # type: ignore[no-any-return]
+
+
 def register(sub: Any) -> None:
     tr = sub.add_parser("train", help="train a learned reference agent")
     algos = tr.add_subparsers(dest="algorithm", required=True, metavar="ALGORITHM")

@@ -135,6 +135,81 @@ def field_docs(cls: type) -> dict[str, str]:
 
 _SCALARS = {"int": int, "float": float, "str": str}
 
+_INF = float("inf")
+FLAG_RANGES: dict[str, tuple[float, float, bool]] = {
+    # whole numbers >= 1: sizes, counts and intervals
+    **{
+        n: (1, _INF, True)
+        for n in (
+            "T", "batch_size", "buffer_size", "checkpoint_every", "critic_width",
+            "curve_episodes", "log_every", "n_atoms", "n_blocks", "n_envs", "n_epochs", "n_step",
+            "n_steps", "ppo_batch_size", "threads", "total_steps", "update_every", "width",
+            "window",
+        )
+    },
+    # whole numbers >= 0 (0 = off, none or the scenario's own)
+    **{
+        n: (0, _INF, True)
+        for n in (
+            "curve_every", "eval_episodes", "learning_starts", "max_episode_steps", "seed",
+            "stop_at", "teacher_epochs", "teacher_transitions",
+        )
+    },
+    # fractions and probabilities
+    **{
+        n: (0, 1, True)
+        for n in (
+            "alpha", "beta_start", "eps_end", "eps_fraction", "eps_smooth", "eps_start",
+            "gae_lambda", "gamma", "polyak", "promote_at",
+        )
+    },
+    # step sizes and temperatures: > 0
+    **{n: (0, _INF, False) for n in ("lr", "lr_actor", "lr_critic", "tau_start", "tau_end")},
+    # weights, penalties, noise scales, margins and limits: >= 0
+    **{
+        n: (0, _INF, True)
+        for n in (
+            "action_noise", "ce_weight", "clip_range", "ent_coef", "failure_penalty",
+            "los_penalty", "max_wall_minutes", "sigma0", "slack",
+        )
+    },
+    # any number (v_min < v_max is checked with the other fields); q_target_max may be inf
+    **{n: (-_INF, _INF, True) for n in ("v_min", "v_max")},
+    "q_target_max": (-_INF, _INF, True),
+}  # fmt: skip
+"""The values each numeric training flag accepts: (low, high, low included). A value outside,
+or NaN, or an infinity where the range is finite, is refused when the flags are parsed, with
+the flag's name and range (exit 2): a trainer never starts on a value it cannot use. A numeric
+flag missing here is an error when its parser is built (tests/rl/test_flag_ranges.py)."""
+
+
+def _ranged(kind: type, name: str) -> Any:
+    """The argparse ``type`` of a numeric flag: parse, then check :data:`FLAG_RANGES`."""
+    low, high, low_in = FLAG_RANGES[name]
+    inf_ok = name == "q_target_max"
+
+    def parse(text: str) -> int | float:
+        try:
+            v = kind(text)
+        except ValueError:
+            what = "a whole number" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        ok = v == v and (v > low if not low_in else v >= low) and v <= high
+        if kind is float and not inf_ok and abs(v) == _INF:
+            ok = False
+        if not ok:
+            lo_b = "[" if low_in else "("
+            lo_s = "-inf" if low == -_INF else f"{low:g}"
+            hi_s = "inf" if high == _INF else f"{high:g}"
+            hi_b = "]" if high != _INF or inf_ok else ")"
+            raise argparse.ArgumentTypeError(
+                f"expected a value in {lo_b}{lo_s}, {hi_s}{hi_b}, got {text}"
+            )
+        return v
+
+    parse.__name__ = kind.__name__
+    return parse
+
 
 def _type_name(f: dataclasses.Field) -> str:
     return f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
@@ -156,7 +231,11 @@ def add_arguments(p: argparse.ArgumentParser, cls: type, **defaults: Any) -> Non
         if _type_name(f) == "bool":
             p.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=doc)
         else:
-            p.add_argument(flag, type=_SCALARS[_type_name(f)], default=default, help=doc)
+            kind = _SCALARS[_type_name(f)]
+            if kind is not str and f.name not in FLAG_RANGES:
+                raise TypeError(f"{cls.__name__}.{f.name}: a numeric flag without a range")
+            typ = kind if kind is str else _ranged(kind, f.name)
+            p.add_argument(flag, type=typ, default=default, help=doc)
 
 
 def from_namespace(cls: type, ns: argparse.Namespace) -> Any:

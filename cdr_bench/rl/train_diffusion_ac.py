@@ -87,6 +87,13 @@ class Args(OffPolicyArgs):
         for name, allowed in CHOICES.items():
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+        from cdr_bench.rl.diffusion_ac import PolicyConfig
+
+        heads = PolicyConfig.n_heads  # the denoiser's attention (not the no-diffusion actor)
+        if self.ablation != "no-diffusion" and self.width % heads:
+            raise ValueError(
+                f"--width {self.width}: must be divisible by the {heads} attention heads"
+            )
         if self.ablation == "no-dpsc":
             self.curriculum = False
 

@@ -46,6 +46,10 @@ class Args(OffPolicyArgs):
     lr: float = 1e-4
     """Adam step size"""
 
+    def __post_init__(self) -> None:
+        if not self.v_min < self.v_max:
+            raise ValueError(f"--v-min {self.v_min:g} must be below --v-max {self.v_max:g}")
+
 
 def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> Rainbow:
     from cdr_bench.rl.rainbow import Rainbow, RainbowConfig

@@ -221,6 +221,10 @@ def load_sweep(
             source, "agent", f"unknown trainer {agent!r} (known: {', '.join(TRAINERS)})"
         ) from None
     known = {a.option_strings[0][2:] for a in parser._actions if a.option_strings}
+    from cdr_bench.rl.cli import args_class
+    from cdr_bench.rl.common import from_namespace
+
+    args_cls = args_class(agent)
     agent_file = source.parent / raw.get(
         "agent_file", f"../agents/{agent.replace('-', '_')}/agent.py"
     )
@@ -320,7 +324,8 @@ def load_sweep(
         for seed in seeds:
             train_flags = {**merged, **base, "seed": seed, "progress": False}
             try:
-                parser.parse_args(flags_argv(train_flags) + ["--run-dir", "x"])
+                ns = parser.parse_args(flags_argv(train_flags) + ["--run-dir", "x"])
+                from_namespace(args_cls, ns)  # the checks across flags, e.g. --v-min < --v-max
             except ValueError as e:
                 raise _err(source, f"{factor} {label}", str(e)) from None
             t = Trial("", factor, label, seed, train_flags, agent, str(agent_file), evaluation)

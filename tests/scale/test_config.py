@@ -33,7 +33,7 @@ def _edit(path: Path, **changes) -> Path:
         ({"budget": {"total_step": 5}}, ["budget.total_step", "unknown field"]),
         ({"evaluation": {"scenarios": ["low"], "episode": 3}}, ["evaluation.episode"]),
         ({"grid": {"T-steps": [8]}}, ["grid.T-steps", "not a flag"]),
-        ({"grid": {"T": ["eight"]}}, ["invalid int value"]),
+        ({"grid": {"T": ["eight"]}}, ["expected a whole number, got 'eight'"]),
         ({"fixed": {"seed": 3}}, ["fixed.seed", "set by the sweep"]),
         ({"agent": "nope"}, ["agent", "unknown trainer"]),
         ({"seeds": [1, 1]}, ["seeds", "twice"]),
