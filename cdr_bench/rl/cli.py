@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 from typing import Any
 
 from cdr_bench.errors import UserError
@@ -66,14 +67,37 @@ def _missing_extra(name: str, missing: str) -> Any:
 
 def _train_with(module: Any) -> Any:
     def cmd_train(ns: argparse.Namespace) -> int:
+        _check_paths(ns)
         try:
             summary = module.run(ns)
         except ValueError as e:
             raise UserError(str(e)) from None
+        except OSError as e:  # e.g. a run folder that cannot be made or written
+            where = e.filename or ns.run_dir
+            raise UserError(f"{where}: {e.strerror or e}") from None
         print(json.dumps(summary, indent=1))
         return 0
 
     return cmd_train
+
+
+def _check_paths(ns: argparse.Namespace) -> None:
+    """What the flags name must exist before anything is written: the training scenario (also
+    with the curriculum, which does not use it) and, with ``--resume``, the state to resume."""
+    from cdr_bench.scenarios import ScenarioError, load_scenario
+
+    try:
+        load_scenario(ns.scenario)
+    except ScenarioError as e:
+        raise UserError(f"--scenario {ns.scenario}: {e}") from None
+    if os.path.exists(ns.run_dir) and not os.path.isdir(ns.run_dir):
+        raise UserError(f"--run-dir {ns.run_dir}: exists and is not a folder")
+    state = os.path.join(ns.run_dir, "state.pt")
+    if ns.resume and not os.path.isfile(state):
+        raise UserError(
+            f"--resume: {state} does not exist: nothing to resume in {ns.run_dir} "
+            "(leave out --resume to start a new run)"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:

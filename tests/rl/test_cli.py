@@ -119,6 +119,24 @@ def test_bad_choices_are_user_errors(tmp_path):
     assert not (tmp_path / "log.jsonl").exists()  # nothing written before the flags are checked
 
 
+@pytest.mark.parametrize(
+    ("flags", "words"),
+    [
+        (["--scenario", "nosuch"], "--scenario nosuch: nosuch: unknown scenario name"),
+        (["--resume"], "--resume: {run}/state.pt does not exist: nothing to resume"),
+        (["--run-dir", "{file}"], "--run-dir {file}: exists and is not a folder"),
+    ],
+)
+def test_missing_scenario_state_or_folder_is_a_user_error(tmp_path, flags, words):
+    run, file = tmp_path / "run", tmp_path / "file"
+    file.write_text("x")
+    flags = [f.format(run=run, file=file) for f in flags]
+    r = cdr_bench("train", "td3", "--run-dir", str(run), *flags, "--no-progress")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert words.format(run=run, file=file) in r.stderr
+    assert not run.exists()
+
+
 def test_mode_summary():
     from cdr_bench.evaluate.analysis import mode_summary
 
