@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -211,6 +212,12 @@ def _render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".gif":
         raise UserError(f"--out {args.out}: expected a .gif path")
+    try:  # before the episode is run: a folder that cannot hold the file is said at once
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"--out {args.out}: cannot make its folder ({e.strerror})") from None
+    if out.is_dir() or not os.access(out.parent, os.W_OK):
+        raise UserError(f"--out {args.out}: not a writable file path")
     env = CDREnv(args.scenario, render_mode="rgb_array")
     if args.zoom_km is not None:
         if not args.zoom_km > 0:
@@ -239,10 +246,13 @@ def _render(args: argparse.Namespace) -> int:
         obs, _, _, _, infos = env.step(actions)
         frames.append(env.render())
     outcome = infos.get("ownship_0", {}).get("outcome", "running") if len(frames) > 1 else "-"
-    out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp")
-    save_gif(frames, str(tmp), fps=args.fps)
-    tmp.replace(out)
+    try:
+        save_gif(frames, str(tmp), fps=args.fps)
+        tmp.replace(out)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise UserError(f"--out {args.out}: cannot write it ({e.strerror})") from None
     print(f"wrote {out} ({len(frames)} frames, ownship outcome: {outcome})")
     return 0
 

@@ -45,6 +45,16 @@ def test_render_gif(tmp_path):
     assert not list(tmp_path.glob(".*tmp"))
     r = cli("render", "low", "--out", str(tmp_path / "x.png"))
     assert r.returncode == 2 and ".gif" in r.stderr
+    (tmp_path / "file").write_text("x")
+    for bad, words in [
+        (tmp_path / "file" / "x.gif", "cannot make its folder"),  # a file where a folder must be
+        (tmp_path / "dir.gif", "not a writable file path"),  # a folder where the file must be
+    ]:
+        (tmp_path / "dir.gif").mkdir(exist_ok=True)
+        r = cli("render", "low", "--out", str(bad))
+        assert r.returncode == 2 and "Traceback" not in r.stderr
+        assert f"--out {bad}: {words}" in r.stderr
+    assert not list(tmp_path.glob(".*tmp"))
 
 
 def test_scenarios_certify(tmp_path):
