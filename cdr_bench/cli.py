@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -146,10 +145,12 @@ def _scenarios_fields(args: argparse.Namespace) -> int:
 def _scenarios_certify(args: argparse.Namespace) -> int:
     import json
 
-    from cdr_bench.evaluate.results import atomic_write_text
+    from cdr_bench.evaluate.results import atomic_write_text, check_output_path
     from cdr_bench.evaluate.search import FAMILIES, certify
     from cdr_bench.scenarios import load_scenario
 
+    if args.out:
+        check_output_path(args.out)
     agent = None if args.agent.lower() == "none" else args.agent
     if agent is not None and not Path(agent).exists():
         raise UserError(f"--agent {agent}: no such file or folder (give a path, or 'none')")
@@ -207,17 +208,13 @@ def _scenarios_certify(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     from cdr_bench.actions import HOLD
     from cdr_bench.env import CDREnv
+    from cdr_bench.evaluate.results import check_output_path
     from cdr_bench.render import save_gif
 
     out = Path(args.out)
     if out.suffix.lower() != ".gif":
         raise UserError(f"--out {args.out}: expected a .gif path")
-    try:  # before the episode is run: a folder that cannot hold the file is said at once
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise UserError(f"--out {args.out}: cannot make its folder ({e.strerror})") from None
-    if out.is_dir() or not os.access(out.parent, os.W_OK):
-        raise UserError(f"--out {args.out}: not a writable file path")
+    check_output_path(out)  # before the episode is run
     env = CDREnv(args.scenario, render_mode="rgb_array")
     if args.zoom_km is not None:
         if not args.zoom_km > 0:
@@ -248,6 +245,7 @@ def _render(args: argparse.Namespace) -> int:
     outcome = infos.get("ownship_0", {}).get("outcome", "running") if len(frames) > 1 else "-"
     tmp = out.with_name(f".{out.name}.tmp")
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
         save_gif(frames, str(tmp), fps=args.fps)
         tmp.replace(out)
     except OSError as e:
@@ -281,6 +279,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except UserError as e:
         print(f"cdr-bench: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # a file the command needed could not be read or written
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"cdr-bench: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("cdr-bench: interrupted", file=sys.stderr)

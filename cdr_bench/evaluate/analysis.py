@@ -20,7 +20,7 @@ from cdr_bench.actions import HOLD, decode
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.cli import add_agent_args, agent_options
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
-from cdr_bench.evaluate.results import atomic_write_text
+from cdr_bench.evaluate.results import atomic_write_text, check_output_path
 from cdr_bench.evaluate.runner import batch_seed, close_all, fault_message, load_for
 from cdr_bench.evaluate.search import FAMILIES, FAMILY_ACTIONS, search_families
 from cdr_bench.evaluate.seeds import episode_seeds
@@ -263,8 +263,12 @@ def heatmap(
         fig.colorbar(im, ax=axes[i, :].tolist(), shrink=0.8, label="share of all samples")
     fig.suptitle(title)
     out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp.png", dir=out.parent)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp.png", dir=out.parent)
+    except OSError as e:
+        plt.close(fig)
+        raise UserError(f"{out}: cannot write it ({e.strerror or e})") from None
     try:
         with os.fdopen(fd, "wb") as f:
             fig.savefig(f, format="png", dpi=80)
@@ -274,6 +278,9 @@ def heatmap(
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, out)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        raise UserError(f"{out}: cannot write it ({e.strerror or e})") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -340,6 +347,8 @@ def multimodal(
 
 
 def cmd_multimodal(ns: argparse.Namespace) -> int:
+    if ns.out:
+        check_output_path(ns.out)
     options = agent_options(ns, ns.agent)
     res = multimodal(
         ns.agent,
@@ -387,6 +396,8 @@ def cmd_latency(ns: argparse.Namespace) -> int:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = str(ns.threads)
     err = UserError
+    if ns.out:
+        check_output_path(ns.out)
     try:
         sizes = [int(x) for x in ns.batch_sizes.split(",")]
     except ValueError:

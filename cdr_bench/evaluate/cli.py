@@ -147,6 +147,7 @@ def agent_options(args: argparse.Namespace, agent: str) -> Any:
 def _evaluate(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
     from cdr_bench.evaluate.report import summary_text
+    from cdr_bench.evaluate.results import check_output_path
     from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
 
     suite = args.suite if (args.suite or args.scenario) else "paper"
@@ -154,7 +155,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     for n in notes:
         print(f"cdr-bench: note: {n}", file=sys.stderr)
     options = agent_options(args, args.agent)
-    out = Path(args.out) if args.out else default_out(args.agent, jobs, suite)
+    out = check_output_path(args.out) if args.out else default_out(args.agent, jobs, suite)
     if out.exists() and not (args.force or args.resume):
         raise UserError(
             f"{out} exists (an earlier result); --force overwrites it, --out writes elsewhere"
@@ -193,8 +194,10 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.report import report_markdown
-    from cdr_bench.evaluate.results import atomic_write_text, read_result
+    from cdr_bench.evaluate.results import atomic_write_text, check_output_path, read_result
 
+    if args.out:
+        check_output_path(args.out)
     loaded = []
     for p in args.results:
         try:

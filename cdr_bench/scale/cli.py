@@ -132,9 +132,13 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
+    from cdr_bench.evaluate.results import check_output_path
     from cdr_bench.scale.plot import plot_sweep
 
     out = Path(args.out) if args.out else Path(args.sweep_dir) / "sensitivity.png"
+    check_output_path(out)
+    if args.json:
+        check_output_path(args.json, "--json")
     plot_sweep(Path(args.sweep_dir), out, json_out=Path(args.json) if args.json else None)
     print(f"wrote {out}")
     return 0

@@ -47,8 +47,8 @@ def test_render_gif(tmp_path):
     assert r.returncode == 2 and ".gif" in r.stderr
     (tmp_path / "file").write_text("x")
     for bad, words in [
-        (tmp_path / "file" / "x.gif", "cannot make its folder"),  # a file where a folder must be
-        (tmp_path / "dir.gif", "not a writable file path"),  # a folder where the file must be
+        (tmp_path / "file" / "x.gif", f"{tmp_path / 'file'} is a file, not a folder"),
+        (tmp_path / "dir.gif", "is a folder; expected a file path"),
     ]:
         (tmp_path / "dir.gif").mkdir(exist_ok=True)
         r = cli("render", "low", "--out", str(bad))
