@@ -168,7 +168,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         suite=suite,
         workers=args.workers,
         resume=args.resume,
-        batch_size=args.batch_size or DEFAULT_BATCH_SIZE,
+        batch_size=DEFAULT_BATCH_SIZE if args.batch_size is None else args.batch_size,
         agent_options=options,
         progress=not args.no_progress,
         backend=args.backend,

@@ -433,3 +433,18 @@ def test_compare_on_the_scenarios_both_results_hold(tmp_path):
     assert "compared on medium only" in r.stderr and "medium" in r.stdout and "low" not in r.stdout
     r = cli("compare", one, two, "--scenario", "low")
     assert r.returncode == 2 and "--scenario low: not in" in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "words"),
+    [
+        ("--batch-size", "0", "--batch-size must be >= 1, got 0"),  # was silently the default
+        ("--workers", "0", "--workers must be >= 1, got 0"),
+        ("--episodes", "-1", "--episodes must be >= 1, got -1"),
+    ],
+)
+def test_counts_below_one_are_refused(tmp_path, flag, value, words):
+    out = tmp_path / "r.json"
+    r = evaluate(AGENTS / "mvp", out, flag, value)
+    assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
