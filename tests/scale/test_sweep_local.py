@@ -67,8 +67,9 @@ def test_sweep_runs_and_resumes(local_ray, tmp_path):
 
 @pytest.mark.slow
 def test_failed_trial_is_reported_and_others_kept(local_ray, tmp_path):
-    # width 12 is not divisible by the 8 attention heads: the trainer fails at start-up
-    sweep = load_sweep(tiny_sweep(tmp_path, [1], grid={"width": [16, 12]}))
+    # a scenario that does not exist passes the sweep's flag checks (a name is a string); the
+    # trainer refuses it at start-up
+    sweep = load_sweep(tiny_sweep(tmp_path, [1], grid={"scenario": ["low", "no-such-scenario"]}))
     out = tmp_path / "out"
     with pytest.raises(UserError, match="1 of 2 trials failed"):
         run_sweep(sweep, out, progress=False)
