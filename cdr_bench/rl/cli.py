@@ -9,6 +9,7 @@ import argparse
 import importlib
 import json
 import os
+import sys
 from typing import Any
 
 from cdr_bench.errors import UserError
@@ -107,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return ns.func(ns)
     except UserError as e:
-        print(f"error: {e}")
+        print(f"error: {e}", file=sys.stderr)
         return 2
 
 
