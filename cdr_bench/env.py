@@ -334,7 +334,7 @@ class CDREnv(ParallelEnv):
                 raise ActionError(f"missing action for live agent {agent!r}")
             act[0, self._index[agent]] = check_action(agent, actions[agent])
         acting = self.agents
-        out = self.vector.step(act)
+        out = self.vector._step(act)  # checked above, agent by agent
         res = out.result
         self._last_result = res
         if self.render_mode is not None:

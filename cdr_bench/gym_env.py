@@ -155,7 +155,7 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
         if a.size and (a.min() < 0 or a.max() >= N_ACTIONS):
             raise ActionError(f"actions must be in 0..{N_ACTIONS - 1}, got {short_repr(a)}")
         self._actions[:, 0] = a
-        out = self.vector.step(self._actions)
+        out = self.vector._step(self._actions)  # checked above
         res = out.result
         reward = out.reward[:, 0]
         term, trunc = out.terminated[:, 0].copy(), out.truncated[:, 0].copy()

@@ -32,7 +32,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS
-from cdr_bench.errors import ArgumentError, short_repr
+from cdr_bench.errors import ActionError, ArgumentError, short_repr
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import Simulator, StepResult, observation_bounds
 from cdr_bench.sim.core import TIMEOUT
@@ -205,8 +205,15 @@ class VectorEnv:
     # -- stepping --------------------------------------------------------------------------------
 
     def step(self, actions: NDArray[np.integer]) -> VectorStep:
-        """Advance every episode by one step with (E, M) actions (validated by the caller:
-        integers in 0..26)."""
+        """Advance every episode by one step with (E, M) actions: integers in 0..26, one per
+        controlled aircraft slot (a slot whose aircraft is not flying is ignored, but its value
+        must still be an action; :data:`cdr_bench.actions.HOLD` is the usual filler). Anything
+        else raises :class:`cdr_bench.errors.ActionError` naming the first bad entry."""
+        return self._step(self._checked(actions))
+
+    def _step(self, actions: NDArray[np.int64]) -> VectorStep:
+        """:meth:`step` with actions already checked: the faces that validate their own actions
+        (``CDREnv``, ``OwnshipVectorEnv``) call this, so a PettingZoo step is not checked twice."""
         sim = self.sim
         res = sim.step(actions)
         obs, masks = res.obs, res.action_mask
@@ -219,6 +226,28 @@ class VectorEnv:
             self.episode_seeds[ended] = chosen
             sim.observe(ended, obs=obs, masks=masks)
         return VectorStep(res, final_obs, final_seeds)
+
+    def _checked(self, actions: Any) -> NDArray[np.int64]:
+        """``actions`` as the (E, M) int64 array the simulator steps, or an :class:`ActionError`
+        (wrong shape, not integers, a value outside 0..26). A few microseconds per step."""
+        try:
+            a = np.asarray(actions)
+        except (ValueError, TypeError):  # ragged nested lists
+            raise ActionError(f"actions: not an array: {short_repr(actions)}") from None
+        shape = (self.num_envs, self.sim.M)
+        if a.shape != shape and a.shape != (shape[0] * shape[1],):
+            raise ActionError(f"actions: expected an integer array of shape {shape}, got {a.shape}")
+        if a.dtype.kind not in "iu":
+            raise ActionError(
+                f"actions: expected integers in 0..{N_ACTIONS - 1}, got an array of {a.dtype}"
+            )
+        a = a.reshape(shape)
+        if a.size and (a.min() < 0 or a.max() >= N_ACTIONS):  # in its own dtype: no wrap-around
+            e, m = np.argwhere((a < 0) | (a >= N_ACTIONS))[0]
+            raise ActionError(
+                f"actions[{e}, {m}] = {a[e, m]}: expected an integer in 0..{N_ACTIONS - 1}"
+            )
+        return a.astype(np.int64, copy=False)
 
     # -- state -----------------------------------------------------------------------------------
 

@@ -163,3 +163,30 @@ def test_a_copied_env_continues_exactly_like_the_original(how):
         )
         assert np.array_equal(a[0]["ownship_0"]["observation"], b[0]["ownship_0"]["observation"])
     assert twin.vector.sim.state.pos is twin.vector.sim.pos_km  # the tuple still holds the arrays
+
+
+@pytest.mark.parametrize(
+    ("actions", "words"),
+    [
+        (np.zeros((5,), np.int64), "actions: expected an integer array of shape (2, 3), got (5,)"),
+        (np.full((2, 3), 0.5), "actions: expected integers in 0..26, got an array of float64"),
+        (np.ones((2, 3), bool), "actions: expected integers in 0..26, got an array of bool"),
+        ([[4, 4, 4], [4, 4, 27]], "actions[1, 2] = 27: expected an integer in 0..26"),
+        ([[-1, 4, 4], [4, 4, 4]], "actions[0, 0] = -1: expected an integer in 0..26"),
+        (np.full((2, 3), 2**63, np.uint64), "actions[0, 0] = 9223372036854775808: expected"),
+    ],
+)
+def test_bad_batched_actions_are_action_errors_and_change_nothing(actions, words):
+    """The batched face validates like the PettingZoo one (an out-of-range index used to turn
+    by two heading steps, a float was truncated); a refused step leaves the state as it was."""
+    from cdr_bench.errors import ActionError
+
+    env = VectorEnv("marl/low-2", num_envs=2, seed=0)
+    env.reset(seed=0)
+    before = env.sim.ac_pos_km.copy()
+    with pytest.raises(ActionError) as e:
+        env.step(actions)
+    assert words in str(e.value)
+    assert np.array_equal(env.sim.ac_pos_km, before)
+    env.step(np.full((2, 3), HOLD, np.int8))  # a flat or narrow integer array is fine
+    env.step(np.full(6, HOLD))
