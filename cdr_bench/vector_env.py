@@ -42,6 +42,22 @@ SEED_BOUND = 2**63
 """Episode seeds drawn from a stream are integers in 0..2**63-1."""
 
 
+def _checked_seeds(seeds: Any, n: int) -> NDArray[np.uint64]:
+    """``reset(seeds=...)``: ``n`` integers in 0..2**64-1 (one per started episode)."""
+    try:
+        values = list(np.asarray(seeds, dtype=object).reshape(-1))
+    except (ValueError, TypeError):
+        values = [seeds]
+    if len(values) != n:
+        raise ArgumentError(f"reset(seeds=...) expects {n} seed(s), got {short_repr(seeds)}")
+    for i, s in enumerate(values):
+        if not _is_int(s, 0) or int(s) >= 2**64:
+            raise ArgumentError(
+                f"reset(seeds=...)[{i}] = {short_repr(s)}: expected an integer in 0..2**64-1"
+            )
+    return np.asarray([int(s) for s in values], dtype=np.uint64)
+
+
 def _is_int(value: object, least: int) -> bool:
     """A Python or numpy integer (not a bool) >= ``least``."""
     return (
@@ -182,16 +198,33 @@ class VectorEnv:
             seeds: one seed per started episode (integers in 0..2**64-1), instead of the stream.
             episodes: which slots to restart (default all).
         """
-        idx = self.sim.all_episodes if episodes is None else np.asarray(episodes, np.int64)
+        idx = self.sim.all_episodes if episodes is None else self._checked_slots(episodes)
+        if seed is not None and not _is_int(seed, 0):
+            raise ArgumentError(
+                f"reset(seed=...) expects None or an integer >= 0, got {short_repr(seed)}"
+            )
+        chosen = None if seeds is None else _checked_seeds(seeds, idx.shape[0])
         if seed is not None:
             self._seed_stream = np.random.default_rng(seed)
-        if seeds is None:
+        if chosen is None:
             chosen = self.draw_seeds(idx.shape[0])
-        else:
-            chosen = np.asarray([int(s) for s in np.asarray(seeds).reshape(-1)], dtype=np.uint64)
         self.sim.reset(chosen, episodes=idx)
         self.episode_seeds[idx] = chosen
         return self.sim.observe()
+
+    def _checked_slots(self, episodes: Any) -> NDArray[np.int64]:
+        """``reset(episodes=...)``: distinct slot indices in 0..num_envs-1."""
+        try:
+            raw = np.asarray(episodes).reshape(-1)
+        except (ValueError, TypeError):
+            raw = np.asarray([None], dtype=object)
+        ok = raw.dtype.kind in "iu" and raw.size == np.unique(raw).size
+        if not ok or (raw.size and (raw.min() < 0 or raw.max() >= self.num_envs)):
+            raise ArgumentError(
+                f"reset(episodes=...) expects distinct slot indices in 0..{self.num_envs - 1}, "
+                f"got {short_repr(episodes)}"
+            )
+        return raw.astype(np.int64)
 
     def end_episodes(self, episodes: NDArray[np.integer]) -> None:
         """End the given episodes now: every aircraft still flying gets the ``timeout`` outcome

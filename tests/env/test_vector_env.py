@@ -190,3 +190,27 @@ def test_bad_batched_actions_are_action_errors_and_change_nothing(actions, words
     assert np.array_equal(env.sim.ac_pos_km, before)
     env.step(np.full((2, 3), HOLD, np.int8))  # a flat or narrow integer array is fine
     env.step(np.full(6, HOLD))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "words"),
+    [
+        ({"seeds": [1, 2, 3]}, "reset(seeds=...) expects 2 seed(s), got [1, 2, 3]"),
+        ({"seeds": [-1, 2]}, "reset(seeds=...)[0] = -1: expected an integer in 0..2**64-1"),
+        ({"seeds": [1, 2**64]}, "reset(seeds=...)[1] = 18446744073709551616: expected"),
+        ({"seeds": [1.5, 2]}, "reset(seeds=...)[0] = 1.5: expected an integer"),  # was int(1.5)
+        ({"seed": "x"}, "reset(seed=...) expects None or an integer >= 0, got 'x'"),
+        ({"episodes": [2]}, "reset(episodes=...) expects distinct slot indices in 0..1"),
+        ({"episodes": [1, 1]}, "reset(episodes=...) expects distinct slot indices in 0..1"),
+    ],
+)
+def test_bad_reset_arguments_are_argument_errors(kwargs, words):
+    from cdr_bench.errors import ArgumentError
+
+    env = VectorEnv("low", num_envs=2, seed=0)
+    env.reset(seeds=[7, 8])
+    with pytest.raises(ArgumentError) as e:
+        env.reset(**kwargs)
+    assert words in str(e.value)
+    assert env.episode_seeds.tolist() == [7, 8]  # nothing restarted
+    env.reset(seeds=np.array([2**64 - 1, 0], np.uint64))  # the whole range is accepted
