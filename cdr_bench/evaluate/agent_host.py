@@ -25,7 +25,8 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-N_ACTIONS = 27
+from cdr_bench.actions import N_ACTIONS
+
 _HEAD = struct.Struct("<cI")
 
 

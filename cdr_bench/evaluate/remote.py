@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cdr_bench.actions import N_ACTIONS
 from cdr_bench.evaluate.loader import CHECKPOINT_ENV, AgentError, agent_name, resolve_agent_path
 from cdr_bench.evaluate.sandbox import (
     Confinement,
@@ -53,7 +54,6 @@ from cdr_bench.evaluate.sandbox import (
     tail,
 )
 
-N_ACTIONS = 27
 DEFAULT_LOAD_TIMEOUT_S = 300.0
 DEFAULT_DECISION_TIMEOUT_S = 10.0
 MAX_TIMEOUT_S = 86400.0

@@ -12,9 +12,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from cdr_bench.actions import N_ACTIONS
 from cdr_bench.rl import kernels
-
-N_ACTIONS = 27
 
 
 def sinusoidal_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
