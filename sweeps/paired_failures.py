@@ -3,6 +3,9 @@
     python sweeps/paired_failures.py leaderboard/results/mvp.jsonl X.jsonl [Y.jsonl ...] \
         [--scenario high]
 
+Each file may be plain or gzip (``X.jsonl.gz``, as ``sweeps/seeds/ship.py --stage`` writes
+it; a slimmed landed trial's comes back with ``python sweeps/landed.py restore``).
+
 A failure is an ownship episode that is not a clean success (LoS, NMAC or no success). Episodes
 are paired by seed; prints, per candidate, the failures of the first file only ("fixed"), of the
 candidate only ("new") and of both. ``cdr-bench compare`` gives the paired intervals.
@@ -11,18 +14,17 @@ candidate only ("new") and of both. ``cdr-bench compare`` gives the paired inter
 from __future__ import annotations
 
 import argparse
-import json
 import sys
+
+from cdr_bench.jsonl import read_jsonl
 
 
 def failures(path: str, scenario: str) -> dict[int, bool]:
     out: dict[int, bool] = {}
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            r = json.loads(line)
-            if r["scenario"] == scenario:
-                a = r["aircraft"][0]
-                out[r["seed"]] = bool(a["los"] or a["nmac"] or a["outcome"] != "success")
+    for r in read_jsonl(path):
+        if r["scenario"] == scenario:
+            a = r["aircraft"][0]
+            out[r["seed"]] = bool(a["los"] or a["nmac"] or a["outcome"] != "success")
     return out
 
 

@@ -3,6 +3,9 @@
     python sweeps/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
         agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5] [--q-above 1.5]
 
+A log may be plain or gzip (``log.jsonl.gz``, as kept in ``sweeps/landed/`` and
+``agents/*/analysis/``).
+
 For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it prints:
 
 * when the stage was reached (transitions);
@@ -29,14 +32,11 @@ import json
 import sys
 from pathlib import Path
 
+from cdr_bench.jsonl import existing, read_jsonl
+
 
 def _lines(path: Path) -> list[dict]:
-    out = []
-    for raw in path.read_text(encoding="utf-8").splitlines():
-        raw = raw.strip()
-        if raw:
-            out.append(json.loads(raw))
-    return out
+    return read_jsonl(path)
 
 
 def _extreme(rows: list[dict], key: str) -> str:
@@ -120,12 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = ap.parse_args(argv)
     for p in a.logs:
-        if not p.is_file():
+        if not existing(p).is_file():
             print(f"error: {p}: no such file", file=sys.stderr)
             return 2
         try:
             print(summarise(p, a.stage, a.below, a.q_above))
-        except (json.JSONDecodeError, KeyError, TypeError) as e:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as e:
             print(f"error: {p}: not a training log ({e})", file=sys.stderr)
             return 2
     return 0

@@ -36,3 +36,16 @@ def test_bad_file_is_a_clear_error(tmp_path, capsys) -> None:
     (tmp_path / "bad.jsonl").write_text("{not json\n")
     assert _mod().main([str(tmp_path / "missing.jsonl"), str(tmp_path / "bad.jsonl")]) == 2
     assert "not a per-episode result file" in capsys.readouterr().err
+
+
+def test_a_compressed_candidate_is_read_as_it_is(tmp_path, capsys) -> None:
+    """A staged trial keeps its per-episode file as ``result.jsonl.gz``."""
+    import gzip
+
+    ok, los = (False, "success"), (True, "success")
+    _write(tmp_path / "a.jsonl", [(1, *los), (2, *ok)])
+    _write(tmp_path / "b.jsonl", [(1, *ok), (2, *ok)])
+    (tmp_path / "b.jsonl.gz").write_bytes(gzip.compress((tmp_path / "b.jsonl").read_bytes()))
+    (tmp_path / "b.jsonl").unlink()
+    assert _mod().main([str(tmp_path / "a.jsonl"), str(tmp_path / "b.jsonl.gz")]) == 0
+    assert "2 episodes, fixed 1, new 0, both 0" in capsys.readouterr().out

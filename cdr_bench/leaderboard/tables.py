@@ -14,7 +14,9 @@ only. ``cdr-bench leaderboard build`` and ``cdr-bench leaderboard render-docs`` 
 differs from what the files give.
 
 Training logs are read as JSON lines: the leaderboard never imports the trainers
-(``cdr_bench.rl``), and they never import it.
+(``cdr_bench.rl``), and they never import it. The logs of runs that are not leaderboard entries
+(tuning, the short design runs) and the per-episode file of an analysis run are kept
+gzip-compressed (``.jsonl.gz``, :mod:`cdr_bench.jsonl`); either form is read.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ import difflib
 import json
 import os
 import re
+import shutil
+import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from functools import cached_property
 from pathlib import Path
@@ -31,6 +35,8 @@ from typing import Any
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import report
 from cdr_bench.evaluate.results import atomic_write_text, read_result
+from cdr_bench.jsonl import GZ, gunzip_file
+from cdr_bench.jsonl import read_jsonl as _read_jsonl_any
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published, load_published
 from cdr_bench.leaderboard.submission import Submission, load_submissions
 
@@ -56,11 +62,38 @@ def _read_json(path: Path) -> Any:
 
 
 def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+    """A JSON-lines file, plain or gzip (``X.jsonl`` or ``X.jsonl.gz``, either name)."""
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-        return [json.loads(x) for x in lines if x.strip()]
-    except (OSError, json.JSONDecodeError) as e:
+        return _read_jsonl_any(path)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise UserError(f"{path}: cannot read ({e})") from None
+
+
+def _read_result_gz(path: Path) -> dict[str, Any]:
+    """:func:`read_result` of a result JSON whose per-episode file is kept compressed beside it
+    (``<episodes_file>.gz``): checked, as always, against the decompressed file (in a
+    temporary folder). A plain per-episode file is read as it is."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        name = data["episodes_file"]
+        packed = path.parent / f"{name}{GZ}"
+        compressed = not (path.parent / name).exists() and packed.is_file()
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError):
+        compressed = False  # read_result names what is wrong
+    if not compressed:
+        return read_result(path)
+    tmp = Path(tempfile.mkdtemp(prefix="cdr-bench-result-"))
+    try:
+        shutil.copyfile(path, tmp / path.name)
+        gunzip_file(packed, tmp / name)
+        try:
+            return read_result(tmp / path.name)
+        except ValueError as e:
+            raise ValueError(str(e).replace(str(tmp), str(path.parent))) from None
+    except OSError as e:
+        raise ValueError(f"{packed}: cannot read ({e})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _final(log: Path) -> dict[str, Any]:
@@ -137,14 +170,15 @@ class Repo:
         self, folder: str, label: str, multimodal: Sequence[str]
     ) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]:
         """An agent's analysis run outside the leaderboard: ``<folder>/result.json`` (written
-        by ``cdr-bench evaluate --out``) and, per scenario of ``multimodal``,
+        by ``cdr-bench evaluate --out``; its per-episode file plain or as ``.jsonl.gz``) and,
+        per scenario of ``multimodal``,
         ``<folder>/multimodal-<scenario>.json`` (``cdr-bench multimodal --out``); returns
         ``(result, [(label, multimodality JSON), ...])``."""
         key = (folder, label, tuple(multimodal))
         if key not in self._analysis:
             d = self.root / folder
             try:
-                res = read_result(d / "result.json")
+                res = _read_result_gz(d / "result.json")
             except ValueError as e:
                 raise UserError(str(e)) from None
             mm = [
@@ -197,10 +231,14 @@ def quick_evals(repo: Repo, logs: Iterable[tuple[str, str]], scenario: str) -> s
 
 
 def tuning(repo: Repo, pattern: str = "agents/*/tuning/*.log.jsonl") -> str:
-    """Every tuning run: ``<run>.log.jsonl`` with its ``<run>.args.json`` beside it."""
+    """Every tuning run: ``<run>.log.jsonl`` (or ``<run>.log.jsonl.gz``) with its
+    ``<run>.args.json`` beside it."""
+    logs: dict[Path, Path] = {}
+    for log in sorted([*repo.root.glob(pattern), *repo.root.glob(pattern + GZ)]):
+        logs.setdefault(log.with_name(log.name.removesuffix(GZ)), log)  # one per run
     runs = []
-    for log in sorted(repo.root.glob(pattern)):
-        run = log.name.removesuffix(".log.jsonl")
+    for plain, log in sorted(logs.items()):
+        run = plain.name.removesuffix(".log.jsonl")
         args = _read_json(log.with_name(f"{run}.args.json"))
         runs.append((log.parent.parent.name, run, args, _read_jsonl(log)))
     return report.tuning_table(runs)
@@ -262,7 +300,7 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
         "training": lambda r: training(r, "diffusion-ac"),
         "ablations": lambda r: measured(r, ABLATIONS, ["high"]),
         "design-runs": lambda r: quick_evals(
-            r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl") for n in DESIGN_RUNS], "high"
+            r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl.gz") for n in DESIGN_RUNS], "high"
         ),
         "multimodality": lambda r: report.multimodality_table(
             [*r.multimodal("diffusion-ac"), *r.analysis(*SAMPLE_TARGET, TACTICAL)[1]]

@@ -22,13 +22,17 @@ the primary seed there, the others in ``seeds/<k>/``).
     python sweeps/seeds/ship.py runs/sweeps/seeds-td3 --stage
 
 commits nothing to an agent (its weights are part of its leaderboard identity, so they change
-only with a re-scoring): it copies the finished trials, each as the sweep wrote it (trial.json,
-result.json/.jsonl, checkpoint.pt, log.jsonl, args.json), to ``sweeps/landed/<sweep>/<key>/`` so
-that a finished seed is committed as it lands. That folder is a sweep output folder: copied back
-to ``runs/sweeps/<sweep>/``, ``cdr-bench sweep ... --resume`` skips those trials. Shipping
-trials later removes their staged copies (one copy of each checkpoint; the staged trials of other
-settings stay); trials whose checkpoint is already shipped into an agent folder are not staged
-again.
+only with a re-scoring): it copies the finished trials to ``sweeps/landed/<sweep>/<key>/`` so
+that a finished seed is committed as it lands: trial.json, args.json, result.json and
+checkpoint.pt as the sweep wrote them, the per-episode file and the training log compressed
+(result.jsonl.gz, log.jsonl.gz) and the learning curve (curve.png) where the run drew one.
+``python sweeps/landed.py restore sweeps/landed/<sweep>`` writes it back as a sweep output folder
+(``runs/sweeps/<sweep>/``: ``cdr-bench sweep ... --resume`` skips those trials, this script
+ships them); ``python sweeps/landed.py slim`` drops the checkpoints and per-episode files of a
+study nothing will ship from (they stay in the git history, where ``restore`` finds them). Shipping trials later
+removes their staged copies (one copy of each checkpoint; the staged trials of other settings
+stay); trials whose checkpoint is already shipped into an agent folder are not staged again.
+A sweep folder given here may hold the logs plain or compressed.
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from cdr_bench.jsonl import existing, gzip_file, read_bytes
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -52,10 +58,15 @@ def _copy(src: Path, dst: Path) -> None:
 
 
 STAGED = ("trial.json", "result.json", "result.jsonl", "checkpoint.pt", "log.jsonl", "args.json")
+COMPRESSED = ("result.jsonl", "log.jsonl")
+"""Staged as ``<name>.gz`` (:func:`cdr_bench.jsonl.gzip_file`)."""
+OPTIONAL = ("curve.png",)
+"""Staged when the trial has it."""
 
 
 def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    """SHA-256 of the file's content (decompressed if it is gzip; either name)."""
+    return hashlib.sha256(read_bytes(path)).hexdigest()
 
 
 def shipped_checkpoints() -> dict[str, Path]:
@@ -63,8 +74,8 @@ def shipped_checkpoints() -> dict[str, Path]:
     (the log too: a shipped checkpoint may have been edited after shipping, e.g. the margin
     written into an MVP + learned improvement checkpoint, while its log is a byte copy)."""
     agents = ROOT / "agents"
-    files = [*agents.rglob("*.pt"), *agents.rglob("training_log.jsonl")]
-    return {_digest(p): p for p in sorted(files)}
+    logs = [*agents.rglob("training_log.jsonl"), *agents.rglob("training_log.jsonl.gz")]
+    return {_digest(p): p for p in sorted([*agents.rglob("*.pt"), *logs])}
 
 
 def stage(sweep_dir: Path) -> int:
@@ -82,6 +93,11 @@ def stage(sweep_dir: Path) -> int:
             continue
         for f in STAGED:
             _copy(d / f, dest / d.name / f)
+            if f in COMPRESSED:
+                gzip_file(dest / d.name / f)
+        for f in OPTIONAL:
+            if (d / f).is_file():
+                _copy(d / f, dest / d.name / f)
         n += 1
         print(f"{d.name} (seed {json.loads(trial.read_text())['seed']}) -> {dest / d.name}")
     print(f"{n} finished trial(s) in {dest}")
@@ -156,7 +172,10 @@ def main(argv: list[str] | None = None) -> int:
         args = json.loads((d / "args.json").read_text(encoding="utf-8"))
         args["run_dir"] = os.path.relpath(d.resolve(), ROOT)
         _copy(d / "checkpoint.pt", dest / "checkpoint.pt")
-        _copy(d / "log.jsonl", dest / "training_log.jsonl")
+        dest.mkdir(parents=True, exist_ok=True)
+        tmp = dest / "training_log.jsonl.tmp"
+        tmp.write_bytes(read_bytes(existing(d / "log.jsonl")))  # plain, as the leaderboard reads
+        os.replace(tmp, dest / "training_log.jsonl")
         if seed == a.primary and (d / "curve.png").is_file():
             _copy(d / "curve.png", dest / "curve.png")
         tmp = dest / "train_args.json.tmp"

@@ -3,6 +3,7 @@ is already shipped into an agent folder is not staged again (one copy of each ch
 
 from __future__ import annotations
 
+import gzip
 import json
 from pathlib import Path
 
@@ -37,6 +38,12 @@ def test_stage_skips_shipped_and_unfinished_trials(
     landed = tmp_path / "sweeps" / "landed" / "seeds-x"
     assert sorted(p.name for p in landed.iterdir()) == ["aaa"]
     assert (landed / "aaa" / "checkpoint.pt").read_bytes() == b"seed-1 weights"
+    # the per-episode file and the log compressed (deterministic gzip), the rest as written
+    assert sorted(p.name for p in (landed / "aaa").iterdir()) == [
+        "args.json", "checkpoint.pt", "log.jsonl.gz", "result.json", "result.jsonl.gz",
+        "trial.json",
+    ]  # fmt: skip
+    assert gzip.decompress((landed / "aaa" / "log.jsonl.gz").read_bytes()) == b"{}\n"
     out = capsys.readouterr().out
     assert "skip bbb: already shipped as agents/x/seeds/2/checkpoint.pt" in out
     assert "skip ccc: not finished" in out
@@ -98,3 +105,23 @@ def test_bad_arguments_are_clear_errors(tmp_path: Path, capsys: pytest.CaptureFi
     assert "agent_dir: expected an agent folder holding agent.py" in capsys.readouterr().err
     assert ship.main([str(tmp_path), str(tmp_path)]) == 2
     assert f"{tmp_path}: expected an agent folder holding agent.py" in capsys.readouterr().err
+
+
+def test_ship_from_a_folder_with_compressed_logs_writes_a_plain_training_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A staged trial keeps its log as ``log.jsonl.gz``; shipped, the agent gets the plain
+    ``training_log.jsonl`` its submission names (the leaderboard reads it plain)."""
+    ship = sweep_script("seeds/ship")
+    monkeypatch.setattr(ship, "ROOT", tmp_path)
+    agent = tmp_path / "agents" / "x"
+    agent.mkdir(parents=True)
+    (agent / "agent.py").write_text("class Agent: pass\n")
+    sweep = tmp_path / "runs" / "sweeps" / "x"
+    _trial(sweep, "aaa", 1, b"weights")
+    log = b'{"step": 1}\n{"final": {"step": 1}}\n'
+    (sweep / "aaa" / "log.jsonl").unlink()
+    (sweep / "aaa" / "log.jsonl.gz").write_bytes(gzip.compress(log))
+    assert ship.main([str(sweep), str(agent)]) == 0
+    assert (agent / "training_log.jsonl").read_bytes() == log
+    assert (agent / "checkpoint.pt").read_bytes() == b"weights"

@@ -92,3 +92,21 @@ def test_min_after_promotion_line(tmp_path: Path) -> None:
     out = _module().summarise(log, 12, 0.5)
     assert "rolling success min 0.00  mean 0.61  max 0.90" in out
     assert "window at promotion: 0.75)" in out
+
+
+def test_a_compressed_log_reads_as_the_plain_one(tmp_path: Path) -> None:
+    """Logs kept in sweeps/landed/ and agents/*/analysis/ are ``.jsonl.gz``."""
+    import gzip
+
+    lines = [
+        {"step": 100 * (i + 1), "curriculum/stage": 12, "charts/success_rolling": s}
+        for i, s in enumerate([0.2, 0.9])
+    ]
+    text = "\n".join(json.dumps(x) for x in lines) + "\n"
+    (tmp_path / "log.jsonl").write_text(text)
+    (tmp_path / "log.jsonl.gz").write_bytes(gzip.compress(text.encode()))
+    mod = _module()
+    plain = mod.summarise(tmp_path / "log.jsonl", 12, 0.5)
+    packed = mod.summarise(tmp_path / "log.jsonl.gz", 12, 0.5)
+    assert plain.splitlines()[1:] == packed.splitlines()[1:]
+    assert mod.main([str(tmp_path / "log.jsonl.gz")]) == 0
