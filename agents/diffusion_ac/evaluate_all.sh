@@ -12,8 +12,9 @@
 #              the paper suite; the complete method is the main entry)
 #   analysis   analysis/latency.json (cdr-bench latency), and analysis/sample-target/: the
 #              reference-budget run of --diffusion-target sample (sweeps/dac-sample.yaml, staged
-#              in sweeps/landed/dac-sample/) on the paper suite (result.json|.jsonl) and its
-#              multimodality on the tactical families (multimodal-<scenario>.json|.png)
+#              in sweeps/landed/dac-sample/) on the paper suite (result.json, its per-episode
+#              file kept compressed as result.jsonl.gz) and its multimodality on the tactical
+#              families (multimodal-<scenario>.json|.png)
 # The leaderboard build also re-renders the leaderboard and every results table in the docs
 # (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
 set -euo pipefail
@@ -36,6 +37,7 @@ for part in "${parts[@]}"; do
             ck=sweeps/landed/dac-sample/ab0ea5d749fdcfa2/checkpoint.pt  # its one trial
             CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag --no-progress --force \
                 --out $st/result.json
+            gzip -9nf $st/result.jsonl  # deterministic (no name, no time); read as it is
             for sc in head-on crossing overtaking; do
                 CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench multimodal $ag --search \
                     --scenario tactical/$sc --out $st/multimodal-tactical_$sc.json

@@ -24,5 +24,5 @@ for name in "${names[@]}"; do
         --total-steps "$budget" --tau-start 0.2 --tau-end 0.05 --ablation "$ablation" \
         --eval-episodes 100 --no-progress "${extra[@]}" > "$run.out" 2>&1
     cp "$run/checkpoint.pt" "agents/diffusion_ac/ablations/$name-$tag.pt"
-    cp "$run/log.jsonl" "agents/diffusion_ac/ablations/$name-$tag.log.jsonl"
+    gzip -9nc "$run/log.jsonl" > "agents/diffusion_ac/ablations/$name-$tag.log.jsonl.gz"
 done
