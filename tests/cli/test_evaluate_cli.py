@@ -1,5 +1,7 @@
-"""Real subprocess runs of ``cdr-bench evaluate / compare / report`` on tiny budgets: result
-files, resume after a kill, workers, and every misbehaving-agent case."""
+"""``cdr-bench evaluate / compare / report`` on tiny budgets: result files, resume after a
+kill, workers, and every misbehaving-agent case. The commands run in this process
+(:func:`cdr_bench.cli.main`, its output captured at the file descriptors, so the agent process's
+output counts too); only the runs that are killed are processes of their own."""
 
 from __future__ import annotations
 
@@ -10,26 +12,50 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+from cdr_bench.cli import main
+
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS = ROOT / "agents"
+HANG_S = 600
+"""Only a guard against a hung test: no result depends on it (never reached on any machine)."""
 
 
-def cli(*args, cwd=None, timeout=120):
-    return subprocess.run(
-        [sys.executable, "-m", "cdr_bench", *map(str, args)],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=timeout,
-    )
+@dataclass
+class Run:
+    returncode: int
+    stdout: str
+    stderr: str
 
 
-def evaluate(agent, out, *extra, scenario="low", episodes=8, cwd=None):
-    return cli(
+@pytest.fixture
+def cdr(capfd):
+    """``cdr(*args, cwd=None)``: ``cdr-bench ARGS`` run by :func:`cdr_bench.cli.main` in this
+    process; its exit code and what it (and the agent's process) wrote."""
+
+    def run(*args, cwd=None) -> Run:
+        capfd.readouterr()
+        before = os.getcwd()
+        try:
+            if cwd is not None:
+                os.chdir(cwd)
+            code = main([str(a) for a in args])
+        except SystemExit as e:  # argparse's own errors and --help
+            code = e.code if isinstance(e.code, int) else 1
+        finally:
+            os.chdir(before)
+        out, err = capfd.readouterr()
+        return Run(code, out, err)
+
+    return run
+
+
+def evaluate(cdr, agent, out, *extra, scenario="low", episodes=8, cwd=None):
+    return cdr(
         "evaluate",
         agent,
         "--scenario",
@@ -72,9 +98,70 @@ class Agent:
 """
 
 
-def test_evaluate_writes_summary_and_result_files(tmp_path):
+# An agent that stands still before batch K + 1 when its process has CDR_TEST_STALL="K MARKER":
+# it creates MARKER and waits until the evaluator is killed (its process is then re-parented,
+# and it exits). The evaluator is killed after exactly K finished batches on any machine, however
+# slow; without the variable the agent is an ordinary one.
+STALLING = """
+import os
+import time
+import numpy as np
+
+BATCHES = [0]
+
+class Agent:
+    def __init__(self, observation_space, action_space):
+        pass
+
+    def reset(self, seed):
+        BATCHES[0] += 1
+        stall = os.environ.get("CDR_TEST_STALL")
+        if stall and BATCHES[0] > int(stall.split()[0]):
+            parent = os.getppid()
+            open(stall.split(maxsplit=1)[1], "w").close()
+            while os.getppid() == parent:
+                time.sleep(0.05)
+            os._exit(0)
+
+    def act_batch(self, obs, masks):
+        return np.full(len(obs), 13)
+
+    def act(self, o):
+        return 13
+"""
+
+
+def killed_after(agent, out, batches, tmp_path):
+    """``cdr-bench evaluate`` of ``agent`` (16 low episodes in batches of 4) in a process of its
+    own, SIGKILLed once ``batches`` batches are in its checkpoint; the command (for --resume)."""
+    cmd = [sys.executable, "-m", "cdr_bench", "evaluate", str(agent), "--scenario", "low"]
+    cmd += ["--episodes", "16", "--out", str(out), "--no-progress", "--batch-size", "4"]
+    marker = tmp_path / f"stalled-{out.stem}"
+    env = {**os.environ, "CDR_TEST_STALL": f"{batches} {marker}"}
+    # the agent stands still in reset(seed), a request under the decision limit
+    proc = subprocess.Popen(
+        [*cmd, "--decision-timeout", "86400"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    deadline = time.monotonic() + HANG_S
+    while not marker.exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"the run ended before batch {batches + 1}: {proc.communicate()[1]!r}")
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    assert not out.exists()
+    partial = out.with_suffix(".partial.jsonl")
+    assert len(partial.read_text().splitlines()) == 1 + batches  # the header and the batches
+    return cmd
+
+
+def test_evaluate_writes_summary_and_result_files(cdr, tmp_path):
     out = tmp_path / "r" / "direct.json"
-    r = evaluate(AGENTS / "direct" / "agent.py", out, scenario="marl/low-2")
+    r = evaluate(cdr, AGENTS / "direct" / "agent.py", out, scenario="marl/low-2")
     assert r.returncode == 0, r.stderr
     assert "ownship" in r.stdout and "intruders" in r.stdout and "success" in r.stdout
     res = json.loads(out.read_text())
@@ -89,68 +176,34 @@ def test_evaluate_writes_summary_and_result_files(tmp_path):
     assert not out.with_suffix(".partial.jsonl").exists()
 
 
-def test_template_agent_and_default_output_path(tmp_path):
+def test_template_agent_and_default_output_path(cdr, tmp_path):
     mine = tmp_path / "my_agent"
     mine.mkdir()
     (mine / "agent.py").write_text((AGENTS / "template" / "agent.py").read_text())
     (mine / "policy.bin").write_bytes(b"weights")
-    r = cli("evaluate", mine, "--scenario", "low", "--episodes", 3, "--no-progress", cwd=tmp_path)
+    r = cdr("evaluate", mine, "--scenario", "low", "--episodes", 3, "--no-progress", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "results" / "my_agent" / "low.json").read_text())
     assert set(res["agent"]["files"]) == {"agent.py", "policy.bin"}
 
 
 @pytest.mark.slow
-def test_workers_and_resume_give_identical_results(tmp_path):
-    slow = write_agent(
-        tmp_path,
-        BASE
-        + """
-    def act_batch(self, obs, masks):
-        time.sleep(0.004)
-        return np.full(len(obs), 13)
-    def act(self, o):
-        return 13
-""",
-    )
+def test_workers_and_resume_give_identical_results(cdr, tmp_path):
+    agent = write_agent(tmp_path, STALLING)
     ref = tmp_path / "ref.json"
-    assert evaluate(slow, ref, episodes=16).returncode == 0
+    assert evaluate(cdr, agent, ref, episodes=16).returncode == 0
     par = tmp_path / "par.json"
-    r = evaluate(slow, par, "--workers", 2, episodes=16)
+    r = evaluate(cdr, agent, par, "--workers", 2, episodes=16)
     assert r.returncode == 0, r.stderr
     assert without_timing(par) == {**without_timing(ref), "episodes_file": "par.jsonl"}
     assert par.with_suffix(".jsonl").read_bytes() == ref.with_suffix(".jsonl").read_bytes()
 
     out = tmp_path / "res.json"
     partial = out.with_suffix(".partial.jsonl")
-    cmd = [
-        sys.executable,
-        "-m",
-        "cdr_bench",
-        "evaluate",
-        str(slow),
-        "--scenario",
-        "low",
-        "--episodes",
-        "16",
-        "--out",
-        str(out),
-        "--no-progress",
-        "--batch-size",
-        "4",
-    ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 30
-    while time.time() < deadline:
-        if partial.exists() and len(partial.read_text().splitlines()) >= 2:
-            break
-        time.sleep(0.01)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert not out.exists(), "killed too late to test resume"
+    cmd = killed_after(agent, out, 1, tmp_path)
     with open(partial, "a") as f:
         f.write('{"kind": "batch", "scenario": "low", "bat')  # a torn write
-    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True)
+    r = cdr(*cmd[3:], "--resume")
     assert r.returncode == 0, r.stderr
     res = json.loads(out.read_text())
     assert res["timing"]["resumed"] is True
@@ -159,22 +212,22 @@ def test_workers_and_resume_give_identical_results(tmp_path):
     assert not partial.exists()
 
 
-def test_compare_paired_and_refuses_other_episodes(tmp_path):
+def test_compare_paired_and_refuses_other_episodes(cdr, tmp_path):
     a, b, c = tmp_path / "a.json", tmp_path / "b.json", tmp_path / "c.json"
-    assert evaluate(AGENTS / "direct", a, episodes=12).returncode == 0
-    assert evaluate(AGENTS / "mvp", b, episodes=12).returncode == 0
-    assert evaluate(AGENTS / "mvp", c, "--seed", 1, episodes=12).returncode == 0
-    r = cli("compare", a, b, "--json", tmp_path / "cmp.json")
+    assert evaluate(cdr, AGENTS / "direct", a, episodes=12).returncode == 0
+    assert evaluate(cdr, AGENTS / "mvp", b, episodes=12).returncode == 0
+    assert evaluate(cdr, AGENTS / "mvp", c, "--seed", 1, episodes=12).returncode == 0
+    r = cdr("compare", a, b, "--json", tmp_path / "cmp.json")
     assert r.returncode == 0, r.stderr
     assert "los_rate" in r.stdout and "B-A" in r.stdout
     rows = json.loads((tmp_path / "cmp.json").read_text())["rows"]
     los = next(x for x in rows if x["metric"] == "los_rate")
     assert los["diff"] == pytest.approx(los["b"] - los["a"])
     assert los["ci95"][0] <= los["diff"] <= los["ci95"][1]
-    r = cli("compare", a, c)
+    r = cdr("compare", a, c)
     assert r.returncode == 2 and "not the same episodes" in r.stderr
     assert "Traceback" not in r.stderr
-    r = cli("report", a, b, "--out", tmp_path / "README.md")
+    r = cdr("report", a, b, "--out", tmp_path / "README.md")
     assert r.returncode == 0, r.stderr
     text = (tmp_path / "README.md").read_text()
     assert "| direct | low | ownship | 12 |" in text and "| mvp | low |" in text
@@ -275,19 +328,24 @@ CASES.update(
 )
 
 
+# The time limits: small only where the agent never finishes (a hang fails against a 0.5 s or 1 s
+# limit the same way on any machine); every other case runs far below its limits, which leaves
+# room for a loaded machine to start the agent's process (Python, numpy: seconds) and decide.
+ROOMY = ["--decision-timeout", HANG_S, "--load-timeout", HANG_S]
+LIMITS = {
+    "hang": ["--decision-timeout", 0.5, "--load-timeout", HANG_S],
+    "swallows_timeout": ["--decision-timeout", 0.5, "--load-timeout", HANG_S],
+    "import_hang": ["--decision-timeout", HANG_S, "--load-timeout", 1],
+    "ctor_hang": ["--decision-timeout", HANG_S, "--load-timeout", 1],
+}
+
+
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_misbehaving_agent_is_reported(tmp_path, case):
+def test_misbehaving_agent_is_reported(cdr, tmp_path, case):
     body, expected = CASES[case]
     path = tmp_path / "missing.py" if body is None else write_agent(tmp_path, body)
-    r = evaluate(
-        path,
-        tmp_path / "out" / "r.json",
-        "--decision-timeout",
-        0.5,
-        "--load-timeout",
-        3,
-        cwd=tmp_path,
-    )
+    limits = LIMITS.get(case, ROOMY)
+    r = evaluate(cdr, path, tmp_path / "out" / "r.json", *limits, cwd=tmp_path)
     assert r.returncode == 2, (r.stdout, r.stderr)
     assert expected in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
@@ -302,11 +360,11 @@ def test_misbehaving_agent_is_reported(tmp_path, case):
         assert "agent_x.py:" in r.stderr and "no seed for you" in r.stderr
 
 
-def test_agent_that_exits_in_a_worker_is_reported(tmp_path):
+def test_agent_that_exits_in_a_worker_is_reported(cdr, tmp_path):
     path = write_agent(
         tmp_path, "import os\n" + BASE + "    def act(self, o):\n        os._exit(0)\n"
     )
-    r = evaluate(path, tmp_path / "r.json", "--workers", 2, episodes=8)
+    r = evaluate(cdr, path, tmp_path / "r.json", "--workers", 2, episodes=8)
     assert r.returncode == 2 and "exited (exit code 0" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and "BrokenProcessPool" not in r.stderr
     assert no_results_left(tmp_path)
@@ -314,34 +372,31 @@ def test_agent_that_exits_in_a_worker_is_reported(tmp_path):
 
 @pytest.mark.parametrize("flag", ["--decision-timeout", "--load-timeout"])
 @pytest.mark.parametrize("value", ["0", "nan", "-1", "inf", "1e9"])
-def test_a_time_limit_cannot_be_disabled(tmp_path, flag, value):
-    r = evaluate(AGENTS / "direct", tmp_path / "r.json", flag, value, episodes=4)
+def test_a_time_limit_cannot_be_disabled(cdr, tmp_path, flag, value):
+    r = evaluate(cdr, AGENTS / "direct", tmp_path / "r.json", flag, value, episodes=4)
     assert r.returncode == 2, r.stderr
     assert flag in r.stderr and "Traceback" not in r.stderr
     assert "expected a number of seconds > 0" in r.stderr or "at most" in r.stderr
 
 
+@pytest.fixture(scope="module")
+def killed_checkpoint(tmp_path_factory):
+    """The agent and the first three lines (header, batches 0 and 1) of the checkpoint of a
+    run killed after two batches."""
+    tmp = tmp_path_factory.mktemp("killed")
+    agent = write_agent(tmp, STALLING)
+    out = tmp / "r.json"
+    killed_after(agent, out, 2, tmp)
+    return agent, out.with_suffix(".partial.jsonl").read_text().splitlines()
+
+
 @pytest.mark.parametrize("kind", ["directory", "bare_batch", "edited", "binary"])
-def test_resume_refuses_a_bad_checkpoint(tmp_path, kind):
+def test_resume_refuses_a_bad_checkpoint(cdr, tmp_path, killed_checkpoint, kind):
+    agent, lines = killed_checkpoint
+    lines = list(lines)
     out = tmp_path / "r.json"
     partial = out.with_suffix(".partial.jsonl")
-    slow = write_agent(
-        tmp_path,
-        BASE + "    def act_batch(self, o, m):\n        time.sleep(0.01)\n"
-        "        return np.full(len(o), 13)\n" + ACT13,
-    )
-    cmd = [sys.executable, "-m", "cdr_bench", "evaluate", str(slow), "--scenario", "low"]
-    cmd += ["--episodes", "16", "--out", str(out), "--no-progress", "--batch-size", "4"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 60
-    while time.time() < deadline:
-        if partial.exists() and len(partial.read_text().splitlines()) >= 3:
-            break
-        time.sleep(0.01)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert not out.exists(), "killed too late to test resume"
-    lines = partial.read_text().splitlines()[:3]
+    partial.write_text("\n".join(lines) + "\n")
     if kind == "directory":
         partial.unlink()
         partial.mkdir()
@@ -362,59 +417,60 @@ def test_resume_refuses_a_bad_checkpoint(tmp_path, kind):
         expected = "unreadable checkpoint"
     if kind not in ("directory", "binary"):
         partial.write_text("\n".join(lines) + "\n")
-    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True)
+    r = cdr("evaluate", agent, "--scenario", "low", "--episodes", 16, "--out", out,
+            "--no-progress", "--batch-size", 4, "--resume")  # fmt: skip
     assert r.returncode == 2, r.stderr
     assert expected in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not out.exists()
 
 
-def test_report_refuses_a_result_whose_episode_log_differs(tmp_path):
+def test_report_refuses_a_result_whose_episode_log_differs(cdr, tmp_path):
     out = tmp_path / "r.json"
-    assert evaluate(AGENTS / "direct", out, episodes=4).returncode == 0
-    assert cli("report", out).returncode == 0
+    assert evaluate(cdr, AGENTS / "direct", out, episodes=4).returncode == 0
+    assert cdr("report", out).returncode == 0
     # a disk that filled up between the two renames: a new JSONL beside the old JSON
     ep = out.with_suffix(".jsonl")
     ep.write_text(ep.read_text().replace('"outcome":"los"', '"outcome":"success"') + "\n")
     for cmd in (("report", out), ("compare", out, out)):
-        r = cli(*cmd)
+        r = cdr(*cmd)
         assert r.returncode == 2, r.stderr
         assert "does not match it" in r.stderr and "Traceback" not in r.stderr
     ep.unlink()
-    r = cli("report", out)
+    r = cdr("report", out)
     assert r.returncode == 2 and "is missing" in r.stderr
 
 
-def test_masked_action_is_counted_not_fatal(tmp_path):
+def test_masked_action_is_counted_not_fatal(cdr, tmp_path):
     climber = write_agent(tmp_path, BASE + "    def act(self, o):\n        return 14\n")
     out = tmp_path / "r.json"
-    r = evaluate(climber, out, episodes=4)  # 14 = climb: masked at level 2
+    r = evaluate(cdr, climber, out, episodes=4)  # 14 = climb: masked at level 2
     assert r.returncode == 0, r.stderr
     m = json.loads(out.read_text())["scenarios"][0]["metrics"]["ownship"]
     assert m["invalid_action_rate"]["count"] > 0
 
 
-def test_summary_fits_100_columns_and_existing_results_are_kept(tmp_path):
+def test_summary_fits_100_columns_and_existing_results_are_kept(cdr, tmp_path):
     out = tmp_path / "r.json"
-    r = evaluate(AGENTS / "direct", out, scenario="curriculum/stage-12", episodes=4)
+    r = evaluate(cdr, AGENTS / "direct", out, scenario="curriculum/stage-12", episodes=4)
     assert r.returncode == 0, r.stderr
     table = [line for line in r.stdout.splitlines() if not line.startswith("wrote ")]
     assert max(len(line) for line in table) <= 100, r.stdout
     assert "success" in r.stdout and "clean" in r.stdout
     before = out.read_bytes()
-    r = evaluate(AGENTS / "mvp", out, scenario="curriculum/stage-12", episodes=4)
+    r = evaluate(cdr, AGENTS / "mvp", out, scenario="curriculum/stage-12", episodes=4)
     assert r.returncode == 2 and "--force" in r.stderr and "Traceback" not in r.stderr
     assert out.read_bytes() == before
     r = evaluate(
-        AGENTS / "mvp", out, "--force", "--wide", scenario="curriculum/stage-12", episodes=4
+        cdr, AGENTS / "mvp", out, "--force", "--wide", scenario="curriculum/stage-12", episodes=4
     )
     assert r.returncode == 0, r.stderr
     assert "R_G" in r.stdout and "latency" in r.stdout and out.read_bytes() != before
 
 
-def test_compare_on_the_scenarios_both_results_hold(tmp_path):
+def test_compare_on_the_scenarios_both_results_hold(cdr, tmp_path):
     one, two = tmp_path / "one.json", tmp_path / "two.json"
-    assert evaluate(AGENTS / "direct", one, scenario="medium", episodes=4).returncode == 0
-    r = cli(
+    assert evaluate(cdr, AGENTS / "direct", one, scenario="medium", episodes=4).returncode == 0
+    r = cdr(
         "evaluate",
         AGENTS / "mvp",
         "--scenario",
@@ -428,10 +484,10 @@ def test_compare_on_the_scenarios_both_results_hold(tmp_path):
         "--no-progress",
     )
     assert r.returncode == 0, r.stderr
-    r = cli("compare", one, two)
+    r = cdr("compare", one, two)
     assert r.returncode == 0, r.stderr
     assert "compared on medium only" in r.stderr and "medium" in r.stdout and "low" not in r.stdout
-    r = cli("compare", one, two, "--scenario", "low")
+    r = cdr("compare", one, two, "--scenario", "low")
     assert r.returncode == 2 and "--scenario low: not in" in r.stderr
 
 
@@ -443,8 +499,8 @@ def test_compare_on_the_scenarios_both_results_hold(tmp_path):
         ("--episodes", "-1", "--episodes must be >= 1, got -1"),
     ],
 )
-def test_counts_below_one_are_refused(tmp_path, flag, value, words):
+def test_counts_below_one_are_refused(cdr, tmp_path, flag, value, words):
     out = tmp_path / "r.json"
-    r = evaluate(AGENTS / "mvp", out, flag, value)
+    r = evaluate(cdr, AGENTS / "mvp", out, flag, value)
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
     assert list(tmp_path.iterdir()) == []

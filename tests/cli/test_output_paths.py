@@ -1,17 +1,19 @@
 """Every command that writes a file checks its path first: a folder given as the file, or a
 file where a folder must be, is a one-line error (exit 2) before any work, and no temporary
-file is left behind; a path the system refuses at write time is one too."""
+file is left behind; a path the system refuses at write time is one too. The commands run in
+this process (:func:`cdr_bench.cli.main`)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
+import os
 from pathlib import Path
 
 import pytest
 
+from cdr_bench.cli import main
+
 ROOT = Path(__file__).resolve().parents[2]
-RESULT = str(ROOT / "leaderboard" / "results" / "mvp.json")
+RESULT = "<result>"  # stands for a small result of the mvp agent (fixture ``result``)
 MVP = str(ROOT / "agents" / "mvp")
 COMMANDS = {
     "report": ["report", RESULT],
@@ -23,14 +25,37 @@ COMMANDS = {
 }
 
 
-def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cdr_bench", *args], capture_output=True, text=True, cwd=cwd
-    )
+@pytest.fixture(scope="module")
+def result(tmp_path_factory: pytest.TempPathFactory) -> str:
+    from cdr_bench.evaluate.api import evaluate, resolve_jobs
+
+    out = tmp_path_factory.mktemp("result") / "mvp.json"
+    jobs, _ = resolve_jobs(["low"], None, 2)
+    evaluate(MVP, jobs, out, batch_size=2, progress=False)
+    return str(out)
+
+
+@pytest.fixture
+def cdr(capsys: pytest.CaptureFixture[str], request: pytest.FixtureRequest):
+    """``cdr(*args, cwd)``: ``cdr-bench ARGS`` run in ``cwd``: (exit code, standard error)."""
+
+    def run(*args: str, cwd: Path) -> tuple[int, str]:
+        if RESULT in args:
+            args = tuple(request.getfixturevalue("result") if a == RESULT else a for a in args)
+        capsys.readouterr()
+        before = os.getcwd()
+        os.chdir(cwd)
+        try:
+            code = main(list(args))
+        finally:
+            os.chdir(before)
+        return code, capsys.readouterr().err
+
+    return run
 
 
 @pytest.mark.parametrize("command", list(COMMANDS))
-def test_bad_output_paths_are_one_line_errors(tmp_path: Path, command: str) -> None:
+def test_bad_output_paths_are_one_line_errors(cdr, tmp_path: Path, command: str) -> None:
     (tmp_path / "file").write_text("x")
     (tmp_path / "dir.out").mkdir()
     ext = ".gif" if command == "render" else ".json"
@@ -40,18 +65,18 @@ def test_bad_output_paths_are_one_line_errors(tmp_path: Path, command: str) -> N
     ]:
         if command == "render" and out.suffix != ".gif":
             continue  # render first insists on a .gif name
-        r = _run(*COMMANDS[command], "--out", str(out), cwd=tmp_path)
-        assert r.returncode == 2, r.stderr
-        assert "Traceback" not in r.stderr
-        assert f"--out {out}: {words}" in r.stderr
+        code, err = cdr(*COMMANDS[command], "--out", str(out), cwd=tmp_path)
+        assert code == 2, err
+        assert "Traceback" not in err
+        assert f"--out {out}: {words}" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.out", "file"]  # nothing else
     assert list((tmp_path / "dir.out").iterdir()) == []
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
-def test_a_write_the_system_refuses_is_a_one_line_error(tmp_path: Path) -> None:
+def test_a_write_the_system_refuses_is_a_one_line_error(cdr, tmp_path: Path) -> None:
     """/proc passes the access check (as root too) but refuses new files: the write fails."""
     for command in ("report", "latency"):
-        r = _run(*COMMANDS[command], "--out", "/proc/cdr-bench-x.json", cwd=tmp_path)
-        assert r.returncode == 2 and "Traceback" not in r.stderr
-        assert "/proc/cdr-bench-x.json: cannot write it" in r.stderr
+        code, err = cdr(*COMMANDS[command], "--out", "/proc/cdr-bench-x.json", cwd=tmp_path)
+        assert code == 2 and "Traceback" not in err
+        assert "/proc/cdr-bench-x.json: cannot write it" in err

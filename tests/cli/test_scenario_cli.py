@@ -1,20 +1,36 @@
-"""Real subprocess runs of the scenario and render commands."""
+"""The scenario and render commands, run by :func:`cdr_bench.cli.main` in this process."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
+from dataclasses import dataclass
 
+import pytest
 from PIL import Image
 
-
-def cli(*args, cwd=None):
-    return subprocess.run(
-        [sys.executable, "-m", "cdr_bench", *args], capture_output=True, text=True, cwd=cwd
-    )
+from cdr_bench.cli import main
 
 
-def test_scenarios_list_show_validate(tmp_path):
+@dataclass
+class Run:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def cli(capsys):
+    """``cli(*args)``: ``cdr-bench ARGS``; its exit code and output."""
+
+    def run(*args: str) -> Run:
+        capsys.readouterr()
+        code = main(list(args))
+        out, err = capsys.readouterr()
+        return Run(code, out, err)
+
+    return run
+
+
+def test_scenarios_list_show_validate(cli, tmp_path):
     r = cli("scenarios", "list")
     assert r.returncode == 0 and "curriculum/stage-12" in r.stdout and "high" in r.stdout
     r = cli("scenarios", "show", "high")
@@ -25,7 +41,7 @@ def test_scenarios_list_show_validate(tmp_path):
     assert r.returncode == 0 and r.stdout.startswith("ok")
 
 
-def test_validate_bad_file_exit_2_one_line(tmp_path):
+def test_validate_bad_file_exit_2_one_line(cli, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("extends: low\ntraffic: {per_route: 0}\n")
     r = cli("scenarios", "validate", str(bad))
@@ -36,7 +52,7 @@ def test_validate_bad_file_exit_2_one_line(tmp_path):
     assert r.returncode == 2 and "unknown scenario name" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_render_gif(tmp_path):
+def test_render_gif(cli, tmp_path):
     out = tmp_path / "ep.gif"
     r = cli("render", "curriculum/stage-02", "--out", str(out), "--max-frames", "30")
     assert r.returncode == 0, r.stderr
@@ -57,7 +73,7 @@ def test_render_gif(tmp_path):
     assert not list(tmp_path.glob(".*tmp"))
 
 
-def test_scenarios_certify(tmp_path):
+def test_scenarios_certify(cli, tmp_path):
     """docs/model.md §8.3: a family passes (exit 0) and its JSON report holds the three parts;
     an encounter that holding survives fails (exit 1); a missing agent is a user error."""
     import json
