@@ -14,7 +14,7 @@ from typing import Any
 
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import results as rf
-from cdr_bench.evaluate.loader import AgentError, agent_identity
+from cdr_bench.evaluate.loader import AgentError, agent_identity, resolve_agent_path
 from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
 from cdr_bench.evaluate.remote import AgentOptions, check_timeout
 from cdr_bench.evaluate.runner import (
@@ -149,7 +149,7 @@ def evaluate(
     check_timeout("--decision-timeout", options.decision_timeout_s)
     check_timeout("--load-timeout", options.load_timeout_s)
     identity = agent_identity(agent_path)
-    agent_file = str(Path(agent_path).resolve())
+    agent_file = str(resolve_agent_path(agent_path))  # a built-in name too (mvp)
     for job in jobs:  # load errors now, before any work
         load_for(agent_file, job.config, options)
     if workers > 1 or backend != "local":
@@ -298,7 +298,7 @@ def record_traces(
     size = min(batch_size, n_episodes)
     if not 1 <= episodes <= size:
         raise UserError(f"episodes to trace: expected 1..{size}, got {episodes}")
-    agent = load_for(str(Path(agent_path).resolve()), config, agent_options)
+    agent = load_for(str(resolve_agent_path(agent_path)), config, agent_options)
     try:
         batch = run_batch(agent, config, base_seed, 0, batch_size, n_episodes, trace=episodes)
     finally:

@@ -17,9 +17,16 @@ def register(sub: Any) -> None:
         help="score an agent on identical episodes (default: the paper suite)",
         description="Score an agent file (or folder with agent.py) on the paper's metrics. "
         "Default: the paper suite (low, medium, high and the tactical scenarios, 1000 episodes "
-        "each). Writes a result JSON and a per-episode JSONL beside it.",
+        "each). Writes a result JSON and a per-episode JSONL beside it. The reference agents "
+        "direct, mvp and random are shipped in the package and named without a path "
+        "(`cdr-bench evaluate mvp --scenario high`): the repository's agents/<name>/agent.py, "
+        "with the same identity hash.",
     )
-    p.add_argument("agent", help="agent .py file, or a folder holding agent.py")
+    p.add_argument(
+        "agent",
+        help="agent .py file, a folder holding agent.py, or a built-in reference agent: "
+        "direct, mvp, random (used when no such file or folder is here)",
+    )
     p.add_argument(
         "--scenario",
         action="append",

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cdr_bench._data import BUILTIN_AGENTS, data_dir
 from cdr_bench.errors import UserError
 
 _SKIP_DIRS = {"__pycache__", ".git", ".ipynb_checkpoints"}
@@ -28,14 +29,21 @@ class AgentError(UserError):
 
 
 def resolve_agent_path(path: str | os.PathLike[str]) -> Path:
-    """The agent's Python file: ``path`` itself, or ``path/agent.py`` for a folder."""
+    """The agent's Python file: ``path`` itself, or ``path/agent.py`` for a folder. A built-in
+    name (:data:`~cdr_bench._data.BUILTIN_AGENTS`: ``direct``, ``mvp``, ``random``) that is no
+    file or folder here is the reference agent shipped in the package (in a source checkout,
+    the repository's ``agents/<name>/agent.py``)."""
     p = Path(path)
+    if os.fspath(path) in BUILTIN_AGENTS and not p.exists():
+        p = data_dir("agents") / os.fspath(path)
     if p.is_dir():
         if not (p / "agent.py").is_file():
             raise AgentError(f"agent folder {path} has no agent.py")
         return (p / "agent.py").resolve()
     if not p.exists():
-        raise AgentError(f"agent file {path} not found")
+        raise AgentError(
+            f"agent file {path} not found (built-in agents: {', '.join(BUILTIN_AGENTS)})"
+        )
     if p.suffix != ".py":
         raise AgentError(f"agent file {path}: expected a .py file or a folder with agent.py")
     return p.resolve()

@@ -27,10 +27,9 @@ from yaml.constructor import ConstructorError
 from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode
 
+from cdr_bench._data import data_dir
 from cdr_bench.errors import short_repr
 from cdr_bench.scenarios.schema import ScenarioConfig, ScenarioError, from_mapping, name_problem
-
-_PACKAGE_DATA = Path(__file__).resolve().parent.parent / "_data" / "scenarios"
 
 MAX_FILE_BYTES = 1 << 20
 """Largest scenario file read (1 MiB; the shipped ones are below 2 KiB)."""
@@ -43,9 +42,10 @@ MAX_EXTENDS = 16
 
 
 def registry_root() -> Path:
-    """Directory holding the shipped scenarios (``CDR_BENCH_SCENARIOS`` overrides it)."""
+    """Directory holding the shipped scenarios (``CDR_BENCH_SCENARIOS`` overrides it): the
+    repository's ``scenarios/`` in a source checkout, the package's copy of it in a wheel."""
     override = os.environ.get("CDR_BENCH_SCENARIOS")
-    return Path(override) if override else _PACKAGE_DATA
+    return Path(override) if override else data_dir("scenarios")
 
 
 def _registry_names(include_bases: bool = False) -> list[str]:
