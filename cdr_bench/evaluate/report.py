@@ -162,13 +162,15 @@ def text_table(head: Sequence[str], rows: Rows, numeric_from: int = 2) -> str:
     return "\n".join(out + [line(r) for r in grid[1:]])
 
 
-def _esc(s: str) -> str:
+def esc(s: str) -> str:
+    """``s`` as HTML text or a quoted attribute value (``&``, ``<``, ``>`` and both quotes
+    escaped): the one escape of every HTML page the benchmark writes."""
     return html.escape(s, quote=True)
 
 
 def inline_md(s: str) -> str:
     """Escape, then render `code` and **bold** (the only inline Markdown the pages use)."""
-    parts = _esc(s).split("`")
+    parts = esc(s).split("`")
     for i in range(1, len(parts), 2):
         parts[i] = f"<code>{parts[i]}</code>"
     text = "".join(parts)
@@ -185,21 +187,21 @@ def html_table(
     one per row, written as the row's ``data-group`` (the page's filter hides groups)."""
     out = [
         '<div class="scroll">',
-        f'<table id="{_esc(tid)}" class="{_esc(("sortable " + cls).strip())}">',
+        f'<table id="{esc(tid)}" class="{esc(("sortable " + cls).strip())}">',
     ]
-    out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in head) + "</tr></thead>")
+    out.append("<thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr></thead>")
     out.append("<tbody>")
     for i, r in enumerate(rows):
         tds = []
         for c in r:
             attrs = ""
             if c.sort is not None:
-                attrs += f' data-sort="{_esc(str(c.sort))}"'
+                attrs += f' data-sort="{esc(str(c.sort))}"'
             if c.best and c.text != "-":
                 attrs += ' class="best"'
             mark = f'<span class="mark">{c.mark}</span>' if c.mark else ""
             tds.append(f"<td{attrs}>{inline_md(c.text)}{mark}</td>")
-        tr = "<tr>" if groups is None else f'<tr data-group="{_esc(groups[i])}">'
+        tr = "<tr>" if groups is None else f'<tr data-group="{esc(groups[i])}">'
         out.append(tr + "".join(tds) + "</tr>")
     out.append("</tbody></table></div>")
     return "\n".join(out)

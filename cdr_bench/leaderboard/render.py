@@ -15,7 +15,6 @@ It has no external assets: CSS, scripts and data are inline, the plots are data 
 from __future__ import annotations
 
 import base64
-import html
 import json
 from typing import Any
 
@@ -26,6 +25,7 @@ from cdr_bench.evaluate.report import (
     Rows,
     claims_table,
     entries_table,
+    esc,
     fmt_metric,
     fmt_value,
     html_table,
@@ -576,10 +576,6 @@ _JS = """
 """
 
 
-def _esc(s: str) -> str:
-    return html.escape(s, quote=True)
-
-
 def _groups_of(data: dict[str, Any], table: dict[str, Any]) -> list[str]:
     group = {e["name"]: e["group"] for e in data["entries"]}
     return [group[r["entry"]] for r in table["rows"]]
@@ -614,8 +610,8 @@ def _replay_html(data: dict[str, Any], replays: dict[str, dict[str, Any]]) -> li
             for i, t in enumerate(eps)
         )
         b += [
-            f'<div class="replay" data-scenario="{_esc(sid)}">',
-            f"<h3>{_esc(sid)}</h3>",
+            f'<div class="replay" data-scenario="{esc(sid)}">',
+            f"<h3>{esc(sid)}</h3>",
             '<div class="controls"><button type="button">play</button>'
             f'<select aria-label="episode">{options}</select>'
             '<input type="range" min="0" max="0" value="0" aria-label="step">'
@@ -624,8 +620,8 @@ def _replay_html(data: dict[str, Any], replays: dict[str, dict[str, Any]]) -> li
         ]
         for n in who:
             b.append(
-                f'<figure data-group="{_esc(group[n])}"><canvas width="320" height="320" '
-                f'data-entry="{_esc(n)}"></canvas><figcaption><strong>{_esc(names[n])}</strong>'
+                f'<figure data-group="{esc(group[n])}"><canvas width="320" height="320" '
+                f'data-entry="{esc(n)}"></canvas><figcaption><strong>{esc(names[n])}</strong>'
                 ' <span class="outcome"></span></figcaption></figure>'
             )
         b += ["</div></div>"]
@@ -645,7 +641,7 @@ def render_html(
     ref = _names(data)[data["reference"]]
     rk = data["ranking"]
     filt = "".join(
-        f'<label><input type="checkbox" value="{g}" checked> {_esc(GROUP_LABEL.get(g, g))}</label>'
+        f'<label><input type="checkbox" value="{g}" checked> {esc(GROUP_LABEL.get(g, g))}</label>'
         for g in data["groups"]
     )
     b: list[str] = [
@@ -666,7 +662,7 @@ def render_html(
         '<div class="conclusion" id="conclusion">',
         *[f"<p>{inline_md(p)}</p>" for p in conclusion(data)],
         "</div>",
-        f'<h2 id="ranking">Ranking: clean success on {_esc(rk["scenario"])}</h2>',
+        f'<h2 id="ranking">Ranking: clean success on {esc(rk["scenario"])}</h2>',
     ]
     head, rows, groups = ranking_table(data)
     b += [
@@ -677,7 +673,7 @@ def render_html(
     title, head, rows = table2_beside(pub, rk["scenario"])
     b += [
         '<section data-group="published">',
-        f"<h3>{_esc(title)}</h3>",
+        f"<h3>{esc(title)}</h3>",
         html_table("table-published-beside", head, rows, "published"),
         "</section>",
     ]
@@ -716,8 +712,8 @@ def render_html(
         head, rows = scenario_table(data, t)
         fixed = " A fixed encounter: values without intervals." if t["fixed"] else ""
         b += [
-            f'<h3 id="{_anchor(t["scenario"])}">{_esc(t["scenario"])}</h3>',
-            f'<p class="note">{_esc(t["description"])} — {t["episodes"]} episodes per '
+            f'<h3 id="{_anchor(t["scenario"])}">{esc(t["scenario"])}</h3>',
+            f'<p class="note">{esc(t["description"])} — {t["episodes"]} episodes per '
             f"entry.{fixed}</p>",
             html_table("table-" + _anchor(t["scenario"]), head, rows, groups=_groups_of(data, t)),
         ]
@@ -725,7 +721,7 @@ def render_html(
     for name, png in plots.items():
         uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
         b.append(
-            f'<figure><img alt="{_esc(name)}" src="{uri}"><figcaption>{_esc(name)}'
+            f'<figure><img alt="{esc(name)}" src="{uri}"><figcaption>{esc(name)}'
             "</figcaption></figure>"
         )
     head, rows, groups = entries_table(data)
@@ -738,7 +734,7 @@ def render_html(
     ]
     for i, (title, head, rows) in enumerate(published_tables(pub)):
         b += [
-            f"<h3>{_esc(title)}</h3>",
+            f"<h3>{esc(title)}</h3>",
             html_table(f"table-published-{i}", head, rows, "published"),
         ]
     b += [
@@ -750,6 +746,6 @@ def render_html(
     if not sbs:
         b.append("<p>No entry names a published row yet.</p>")
     for i, (title, head, rows) in enumerate(sbs):
-        b += [f"<h3>{_esc(title)}</h3>", html_table(f"table-side-{i}", head, rows)]
+        b += [f"<h3>{esc(title)}</h3>", html_table(f"table-side-{i}", head, rows)]
     b += ["</section>", f"<script>{_JS}</script>", "</body></html>", ""]
     return "\n".join(b)
