@@ -88,6 +88,51 @@ def _err(v: float, ci: list[float | None], scale: float) -> tuple[float, float]:
     return max(v - a, 0.0), max(b - v, 0.0)
 
 
+def _row(table: dict[str, Any], name: str) -> dict[str, Any] | None:
+    """The entry's row of a table (None when the entry has none)."""
+    return next((r for r in table["rows"] if r["entry"] == name), None)
+
+
+def _entry_errorbars(
+    ax: Any,
+    style: dict[str, Any],
+    tables: list[dict[str, Any]],
+    name: str,
+    key: str,
+    scale: float,
+    x: list[float],
+    **kw: Any,
+) -> list[float]:
+    """One entry's metric ``key`` (times ``scale``) with its 95 % interval, at ``x[i]`` for
+    table i, on the tables that have a value for it; ``kw``: the marker's own style. Returns
+    the values drawn."""
+    xs, ys, lo, hi = [], [], [], []
+    for i, t in enumerate(tables):
+        row = _row(t, name)
+        if row is None or row["metrics"][key]["value"] is None:
+            continue
+        m = row["metrics"][key]
+        v = scale * m["value"]
+        a, b = _err(v, m["ci95"], scale)
+        xs.append(x[i])
+        ys.append(v)
+        lo.append(a)
+        hi.append(b)
+    if xs:
+        ax.errorbar(
+            xs,
+            ys,
+            yerr=[lo, hi],
+            color=style["color"],
+            mfc=style["mfc"],
+            capsize=2,
+            lw=1,
+            label=style["label"],
+            **kw,
+        )
+    return ys
+
+
 def _points(
     data: dict[str, Any], tables: list[dict[str, Any]], key: str, kind: str, title: str
 ) -> bytes:
@@ -99,33 +144,9 @@ def _points(
     scale = 100.0 if kind == "rate" else 1.0
     seen = []
     for j, name in enumerate(entries):
-        xs, ys, lo, hi = [], [], [], []
-        for i, t in enumerate(tables):
-            row = next((r for r in t["rows"] if r["entry"] == name), None)
-            if row is None or row["metrics"][key]["value"] is None:
-                continue
-            m = row["metrics"][key]
-            v = scale * m["value"]
-            a, b = _err(v, m["ci95"], scale)
-            xs.append(i - 0.4 + width * (j + 0.5))
-            ys.append(v)
-            lo.append(a)
-            hi.append(b)
-            seen.append(v)
-        if xs:
-            st = styles[name]
-            ax.errorbar(
-                xs,
-                ys,
-                yerr=[lo, hi],
-                fmt=st["marker"],
-                color=st["color"],
-                mfc=st["mfc"],
-                ms=6,
-                capsize=2,
-                lw=1,
-                label=st["label"],
-            )
+        st = styles[name]
+        x = [i - 0.4 + width * (j + 0.5) for i in range(len(tables))]
+        seen += _entry_errorbars(ax, st, tables, name, key, scale, x, fmt=st["marker"], ms=6)
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
     for i in range(1, len(tables)):
         ax.axvline(i - 0.5, color="0.85", lw=0.8)
@@ -144,31 +165,9 @@ def _success_vs_density(data: dict[str, Any], tables: list[dict[str, Any]]) -> b
     fig, ax = _figure(9, 4.2)
     n = max(len(data["entries"]), 1)
     for j, name in enumerate(_ranked(data)):
-        xs, ys, lo, hi = [], [], [], []
-        for i, t in enumerate(tables):
-            row = next((r for r in t["rows"] if r["entry"] == name), None)
-            if row is None:
-                continue
-            m = row["metrics"]["success_rate"]
-            v = 100 * m["value"]
-            a, b = _err(v, m["ci95"], 100.0)
-            xs.append(i + 0.3 * (j / n - 0.5))
-            ys.append(v)
-            lo.append(a)
-            hi.append(b)
-        if xs:
-            st = styles[name]
-            ax.errorbar(
-                xs,
-                ys,
-                yerr=[lo, hi],
-                marker=st["marker"],
-                color=st["color"],
-                mfc=st["mfc"],
-                capsize=2,
-                lw=1,
-                label=st["label"],
-            )
+        st = styles[name]
+        x = [i + 0.3 * (j / n - 0.5) for i in range(len(tables))]
+        _entry_errorbars(ax, st, tables, name, "success_rate", 100.0, x, marker=st["marker"])
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
     ax.set_xlabel("traffic density")
     ax.set_ylabel("success rate (%), 95 % interval")
@@ -186,7 +185,7 @@ def _latency(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
     for j, name in enumerate(entries):
         xs, med, p99 = [], [], []
         for i, t in enumerate(tables):
-            row = next((r for r in t["rows"] if r["entry"] == name), None)
+            row = _row(t, name)
             if row is None or row["latency_ms"]["median"] is None:
                 continue
             xs.append(i - 0.4 + width * (j + 0.5))
@@ -224,7 +223,7 @@ def _pareto(data: dict[str, Any], table: dict[str, Any]) -> bytes:
     fig, ax = _figure(9, 5)
     pts = []
     for name in _ranked(data):
-        row = next((r for r in table["rows"] if r["entry"] == name), None)
+        row = _row(table, name)
         if row is None:
             continue
         x_m, y_m = row["metrics"]["extra_path_km"], row["metrics"]["los_rate"]
