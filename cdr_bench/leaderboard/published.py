@@ -78,29 +78,26 @@ def _load(path: Path) -> dict[str, Any]:
     return data
 
 
+def _rows(table: str, data: dict[str, Any], name: str, row_density: bool) -> list[PublishedRow]:
+    """The rows of one loaded table, named by their field ``name`` (``agent``, ``variant``), at
+    their own ``density`` (``row_density``) or at the table's."""
+    return [
+        PublishedRow(
+            table,
+            r[name],
+            r["density"] if row_density else data["density"],
+            dict(zip(data["columns"], r["values"], strict=True)),
+            data.get("episodes"),
+        )
+        for r in data["rows"]
+    ]
+
+
 def load_published(leaderboard_dir: str | os.PathLike[str]) -> Published:
     d = Path(leaderboard_dir) / "published"
     t2, t3 = _load(d / "table2.yaml"), _load(d / "table3.yaml")
-    rows = [
-        PublishedRow(
-            "Table 2",
-            r["agent"],
-            r["density"],
-            dict(zip(t2["columns"], r["values"], strict=True)),
-            t2.get("episodes"),
-        )
-        for r in t2["rows"]
-    ]
-    rows += [
-        PublishedRow(
-            "Table 3",
-            r["variant"],
-            t3["density"],
-            dict(zip(t3["columns"], r["values"], strict=True)),
-            t3.get("episodes"),
-        )
-        for r in t3["rows"]
-    ]
+    rows = _rows("Table 2", t2, "agent", row_density=True)
+    rows += _rows("Table 3", t3, "variant", row_density=False)
     return Published(
         citation2=t2["citation"],
         citation3=t3["citation"],
