@@ -273,6 +273,18 @@ _C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
 _C10, _C12 = -1.0 / 3628800.0, 1.0 / 479001600.0
 _C14, _C16 = -1.0 / 87178291200.0, 1.0 / 20922789888000.0
 _C18 = -1.0 / 6402373705728000.0
+_SIN = (_S17, _S15, _S13, _S11, _S9, _S7, _S5, _S3)  # sin x = x + x (x^2 p(x^2)), highest first
+_COS = (_C18, _C16, _C14, _C12, _C10, _C8, _C6, _C4, _C2, 1.0)  # cos x = q(x^2), highest first
+
+
+@njit(cache=True)
+def _horner(coefs, x2):
+    """The polynomial in ``x2`` with coefficients ``coefs`` (highest power first) by Horner's
+    rule: ``coefs[i] + x2 * (...)`` from the highest power down."""
+    acc = coefs[0]
+    for i in range(1, len(coefs)):
+        acc = coefs[i] + x2 * acc
+    return acc
 
 
 @njit(cache=True)
@@ -281,23 +293,8 @@ def sin_cos_deg(angle_deg):
     k = int(angle_deg / 90.0 + 8.5) - 8  # nearest multiple of 90 degrees (truncation >= 0)
     x = (angle_deg - 90.0 * k) * _DEG
     x2 = x * x
-    sn = _S15 + x2 * _S17
-    sn = _S13 + x2 * sn
-    sn = _S11 + x2 * sn
-    sn = _S9 + x2 * sn
-    sn = _S7 + x2 * sn
-    sn = _S5 + x2 * sn
-    sn = _S3 + x2 * sn
-    sn = x + x * (x2 * sn)
-    cs = _C16 + x2 * _C18
-    cs = _C14 + x2 * cs
-    cs = _C12 + x2 * cs
-    cs = _C10 + x2 * cs
-    cs = _C8 + x2 * cs
-    cs = _C6 + x2 * cs
-    cs = _C4 + x2 * cs
-    cs = _C2 + x2 * cs
-    cs = 1.0 + x2 * cs
+    sn = x + x * (x2 * _horner(_SIN, x2))
+    cs = _horner(_COS, x2)
     q = (k + 8) % 4
     if q == 0:
         return sn, cs
