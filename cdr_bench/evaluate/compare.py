@@ -3,9 +3,11 @@
 The comparison runs on the scenarios both results hold (or those named with ``--scenario``),
 each with the same config hash, episode count and episode seeds in both (common random
 numbers); anything else is refused. For each scenario, aircraft role and
-metric the difference B - A comes with a 95 % paired percentile-bootstrap interval: episodes are
-resampled jointly for both agents (2000 resamples, fixed seed), and a metric is the ratio of
-per-episode sums (so learning intruders are resampled as whole episodes).
+metric of the registry (:data:`cdr_bench.evaluate.metrics.METRICS`) the difference B - A comes
+with a 95 % paired percentile-bootstrap interval: episodes are resampled jointly for both agents
+(2000 resamples, fixed seed), and a metric is the ratio of per-episode sums of its facts
+(:meth:`~cdr_bench.evaluate.metrics.Metric.paired`; so learning intruders are resampled as whole
+episodes).
 """
 
 from __future__ import annotations
@@ -19,38 +21,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, role_of
+from cdr_bench.evaluate.metrics import (
+    BOOTSTRAP_RESAMPLES,
+    BOOTSTRAP_SEED,
+    METRICS,
+    get_metric,
+    role_of,
+)
 from cdr_bench.evaluate.results import read_episodes, read_result
-
-# metric -> (numerator, denominator) of one aircraft record
-_METRICS: dict[str, tuple[Any, Any]] = {
-    "success_rate": (lambda r: r["outcome"] == "success", lambda r: 1),
-    "los_rate": (lambda r: r["los"], lambda r: 1),
-    "nmac_rate": (lambda r: r["outcome"] == "nmac", lambda r: 1),
-    "timeout_rate": (lambda r: r["outcome"] == "timeout", lambda r: 1),
-    "avg_steps_success": (
-        lambda r: r["steps"] if r["outcome"] == "success" else 0,
-        lambda r: r["outcome"] == "success",
-    ),
-    "clean_success_rate": (lambda r: r["outcome"] == "success" and not r["los"], lambda r: 1),
-    "goal_reward": (lambda r: r["goal_reward"], lambda r: 1),
-    "safety_reward": (lambda r: r["safety_reward"], lambda r: 1),
-    "invalid_action_rate": (lambda r: r["invalid_actions"], lambda r: r["steps"]),
-    "los_events": (lambda r: r["los_events"], lambda r: 1),
-    "los_time_s": (lambda r: r["los_s"], lambda r: 1),
-    "intrusion_severity": (lambda r: r["severity"] if r["los"] else 0, lambda r: r["los"]),
-    "conflicts": (lambda r: r["conflicts"], lambda r: 1),
-    "extra_path_km": (
-        lambda r: r["path_km"] - r["direct_km"] if r["outcome"] == "success" else 0,
-        lambda r: r["outcome"] == "success",
-    ),
-    "delay_s": (
-        lambda r: r["flight_s"] - r["direct_s"] if r["outcome"] == "success" else 0,
-        lambda r: r["outcome"] == "success",
-    ),
-    "manoeuvres": (lambda r: r["manoeuvres"], lambda r: 1),
-    "nmac_per_flight_hour": (lambda r: r["nmac_events"], lambda r: r["flight_s"] / 3600.0),
-}
 
 
 def _sums(
@@ -59,12 +37,13 @@ def _sums(
     mine = [[ac for ac in ep["aircraft"] if role_of(ac["id"]) == role] for ep in episodes]
     out = {}
     for name in names:
-        num, den = _METRICS[name]
+        paired = get_metric(name).paired
         nd = np.zeros((len(episodes), 2))
         for i, acs in enumerate(mine):
             for ac in acs:
-                nd[i, 0] += float(num(ac))
-                nd[i, 1] += float(den(ac))
+                num, den = paired(ac)
+                nd[i, 0] += num
+                nd[i, 1] += den
         out[name] = nd
     return out
 
@@ -121,10 +100,11 @@ def compare(
     every metric or those named in ``metrics`` (the same numbers either way: the resampled
     episodes are drawn per scenario); :class:`UserError` if a compared scenario is not on the
     same episodes."""
-    names = list(_METRICS) if metrics is None else list(dict.fromkeys(metrics))
-    unknown = [m for m in names if m not in _METRICS]
+    known = [m.key for m in METRICS]
+    names = known if metrics is None else list(dict.fromkeys(metrics))
+    unknown = [m for m in names if m not in known]
     if unknown:
-        raise UserError(f"unknown metric(s) {unknown}; known: {', '.join(_METRICS)}")
+        raise UserError(f"unknown metric(s) {unknown}; known: {', '.join(known)}")
     try:
         (a, ea), (b, eb) = _load(path_a), _load(path_b)
     except ValueError as e:
@@ -208,8 +188,9 @@ def comparison_table(cmp: dict[str, Any]) -> str:
     a, b = cmp["a"]["agent"], cmp["b"]["agent"]
     head = ["scenario", "aircraft", "metric", f"A={a}", f"B={b}", "B-A", "95% paired CI", ""]
     rows = [head]
+    kinds = {m.key: m.kind for m in METRICS}
     for r in cmp["rows"]:
-        pct = r["metric"].endswith("_rate")
+        pct = kinds.get(r["metric"], "") == "rate"
         f = (lambda x: f"{100 * x:.1f}%") if pct else (lambda x: f"{x:.3f}")
         g = (lambda x: f"{100 * x:+.1f}") if pct else (lambda x: f"{x:+.3f}")
         lo, hi = r["ci95"]

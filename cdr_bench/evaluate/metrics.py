@@ -28,14 +28,25 @@ Field metrics (records of schema 3 also carry ``los_events``, ``los_s``, ``nmac_
 
 Intervals: Wilson score (z = 1.96) for rates, percentile bootstrap (2000 resamples, fixed seed,
 so deterministic) for means. For learning intruders every aircraft-episode counts as one trial.
+
+**One registry.** Each metric is one :class:`Metric` in :data:`METRICS`: its key, the
+per-record fact it reads, its aggregate (rate with the Wilson interval, mean with the bootstrap
+interval, Poisson rate per flight hour), its direction, its headers and number format, and
+whether it is a detail column. Everything else reads it: :func:`group_metrics` (so every result
+read), the tables of :mod:`cdr_bench.evaluate.report` (``COLUMNS`` / ``MAIN_COLUMNS``, thence
+the leaderboard's pages and ``leaderboard.json``), the paired comparison of
+:mod:`cdr_bench.evaluate.compare` (:meth:`Metric.paired`) and the trainers' quick evaluation
+(:meth:`Metric.point`). :func:`register_metric` adds one at run time over facts already in the
+records; no result file changes (files hold facts, metrics are computed when read).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -140,39 +151,371 @@ FIELD_METRICS = (
 """Keys of the field-standard metrics, in display order (docs/model.md §10.1)."""
 
 
+# ----------------------------------------------------------------------------------------------
+# The registry: every metric defined once
+
+Record = Mapping[str, Any]
+"""One per-aircraft episode record (a line of the per-episode log, one aircraft)."""
+
+AGGREGATES = ("rate", "mean", "per_h")
+FORMATS = ("rate", "mean", "per_h")
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One metric: the per-episode fact it reads, how the facts aggregate, and how it is shown.
+
+    The fact is a function of one per-aircraft record; what it means depends on ``aggregate``:
+
+    * ``rate``: ``value(r)`` counts events (a bool: the episode had it; or an int, e.g. masked
+      decisions) out of ``over(r)`` trials (an int; default 1: the episode is one trial). The
+      group's value is events / trials with the Wilson interval.
+    * ``mean``: ``value(r)`` is the record's value, over the records where ``over(r)`` is true
+      (default: every record). The group's value is the mean with the bootstrap interval.
+    * ``per_h``: ``value(r)`` counts events (an int) over ``over(r)`` seconds of exposure
+      (required). The group's value is events per hour with the Poisson score interval.
+
+    The paired comparison (``cdr-bench compare``, the leaderboard's marks) uses the same facts
+    per episode, as a ratio of sums: :meth:`paired`.
+    """
+
+    key: str
+    """Key in a result's ``metrics``, in ``cdr-bench compare`` and in ``leaderboard.json``."""
+    header: str
+    """Column header of the tables."""
+    aggregate: str
+    """``rate``, ``mean`` or ``per_h`` (see the class docstring)."""
+    higher: bool
+    """Higher is better."""
+    value: Callable[[Record], Any]
+    """The per-record fact (see the class docstring)."""
+    over: Callable[[Record], Any] | None = None
+    """rate: trials of the record (None: 1); mean: whether the record counts (None: every
+    record); per_h: exposure of the record in seconds."""
+    short: str = ""
+    """Header of the compact terminal summary; empty: not in it."""
+    detail: bool = True
+    """Only in the full per-result tables (``cdr-bench evaluate --wide`` / ``report``) and in
+    ``leaderboard.json``; False: also a column of the leaderboard's pages and the docs' tables."""
+    fmt: str = ""
+    """Number format: ``rate`` (in %, one decimal), ``mean`` (two decimals) or ``per_h`` (three
+    significant digits); empty: the aggregate's."""
+    doc: str = ""
+    """What it measures, in a sentence."""
+
+    def __post_init__(self) -> None:
+        if self.aggregate not in AGGREGATES:
+            raise ValueError(f"metric {self.key}: aggregate must be one of {AGGREGATES}")
+        if self.fmt and self.fmt not in FORMATS:
+            raise ValueError(f"metric {self.key}: fmt must be one of {FORMATS}")
+        if self.aggregate == "per_h" and self.over is None:
+            raise ValueError(f"metric {self.key}: a per_h metric needs its exposure (over)")
+
+    @property
+    def kind(self) -> str:
+        """How its numbers are shown (``rate``, ``mean`` or ``per_h``): the format."""
+        return self.fmt or self.aggregate
+
+    def compute(self, records: Sequence[Record]) -> dict[str, Any]:
+        """The group's value with its 95 % interval (:func:`rate`, :func:`mean` or
+        :func:`poisson_rate`)."""
+        f, over = self.value, self.over
+        if self.aggregate == "rate":
+            k = sum(int(f(r)) for r in records)
+            n = len(records) if over is None else sum(int(over(r)) for r in records)
+            return rate(k, n)
+        if self.aggregate == "mean":
+            return mean(
+                [f(r) for r in records] if over is None else [f(r) for r in records if over(r)]
+            )
+        assert over is not None
+        hours = sum(float(over(r)) for r in records) / 3600.0
+        return poisson_rate(sum(int(f(r)) for r in records), hours)
+
+    def paired(self, record: Record) -> tuple[float, float]:
+        """``(numerator, denominator)`` of one record for the paired comparison, which sums both
+        over an episode's records and takes their ratio: events and trials (rates; per
+        episode: a binary outcome), the value where it counts and whether it counts (means),
+        events and exposure in hours (per_h)."""
+        f, over = self.value, self.over
+        if self.aggregate == "rate":
+            return float(f(record)), 1.0 if over is None else float(over(record))
+        if self.aggregate == "mean":
+            if over is None:
+                return float(f(record)), 1.0
+            counts = over(record)
+            return (float(f(record)) if counts else 0.0), float(counts)
+        assert over is not None
+        return float(f(record)), float(over(record)) / 3600.0
+
+    def point(self, records: Sequence[Record]) -> float:
+        """The unrounded value over ``records`` (NaN without trials), no interval: the ratio of
+        the summed :meth:`paired` terms (the trainers' quick evaluation)."""
+        if not records:
+            return math.nan
+        nd = np.array([self.paired(r) for r in records], dtype=float)
+        d = nd[:, 1].sum()
+        return float(nd[:, 0].sum() / d) if d > 0 else math.nan
+
+
+def _outcome(name: str) -> Callable[[Record], bool]:
+    return lambda r: r["outcome"] == name
+
+
+def _success(r: Record) -> bool:
+    return bool(r["outcome"] == "success")
+
+
+_BUILTIN: tuple[Metric, ...] = (
+    Metric(
+        "success_rate",
+        "success",
+        "rate",
+        True,
+        _success,
+        short="success",
+        detail=False,
+        doc="Goal reached without NMAC (and without LoS where a LoS ends the episode).",
+    ),
+    Metric(
+        "los_rate",
+        "LoS",
+        "rate",
+        False,
+        lambda r: r["los"],
+        short="LoS",
+        detail=False,
+        doc="At least one loss of separation, whatever the outcome (an NMAC is also a LoS).",
+    ),
+    Metric(
+        "nmac_rate",
+        "NMAC",
+        "rate",
+        False,
+        _outcome("nmac"),
+        short="NMAC",
+        detail=False,
+        doc="Ended by a near mid-air collision.",
+    ),
+    Metric(
+        "timeout_rate",
+        "timeout",
+        "rate",
+        False,
+        _outcome("timeout"),
+        short="timeout",
+        detail=False,
+        doc="Ran out of steps.",
+    ),
+    Metric(
+        "los_terminated_rate",
+        "ended by LoS",
+        "rate",
+        False,
+        _outcome("los"),
+        doc="Ended by a LoS (only where a LoS ends the episode).",
+    ),
+    Metric(
+        "boundary_rate",
+        "boundary",
+        "rate",
+        False,
+        _outcome("boundary"),
+        doc="Ended by leaving the sector (only where that ends the episode).",
+    ),
+    Metric(
+        "avg_steps_success",
+        "steps (success)",
+        "mean",
+        False,
+        lambda r: r["steps"],
+        _success,
+        short="steps",
+        detail=False,
+        doc="Steps of the successful episodes.",
+    ),
+    Metric(
+        "clean_success_rate",
+        "clean success",
+        "rate",
+        True,
+        lambda r: r["outcome"] == "success" and not r["los"],
+        short="clean",
+        detail=False,
+        doc="Goal reached with no LoS at all.",
+    ),
+    Metric(
+        "goal_reward",
+        "R_G",
+        "mean",
+        True,
+        lambda r: r["goal_reward"],
+        detail=False,
+        doc="Episode sum of the goal reward R_G.",
+    ),
+    Metric(
+        "safety_reward",
+        "R_S",
+        "mean",
+        True,
+        lambda r: r["safety_reward"],
+        detail=False,
+        doc="Episode sum of the safety reward R_S.",
+    ),
+    Metric(
+        "invalid_action_rate",
+        "invalid",
+        "rate",
+        False,
+        lambda r: r["invalid_actions"],
+        lambda r: r["steps"],
+        detail=False,
+        doc="Masked (invalid) actions / decisions.",
+    ),
+    Metric(
+        "los_events",
+        "LoS events",
+        "mean",
+        False,
+        lambda r: r["los_events"],
+        doc="LoS events per flight (pairs entering a LoS).",
+    ),
+    Metric(
+        "los_time_s",
+        "LoS time s",
+        "mean",
+        False,
+        lambda r: r["los_s"],
+        doc="Seconds in LoS per flight.",
+    ),
+    Metric(
+        "intrusion_severity",
+        "severity",
+        "mean",
+        False,
+        lambda r: r["severity"],
+        lambda r: r["los"],
+        doc="1 - min separation / LoS threshold, over the flights with a LoS.",
+    ),
+    Metric(
+        "conflicts",
+        "conflicts",
+        "mean",
+        False,
+        lambda r: r["conflicts"],
+        doc="Predicted conflicts per flight.",
+    ),
+    Metric(
+        "extra_path_km",
+        "extra path km",
+        "mean",
+        False,
+        lambda r: r["path_km"] - r["direct_km"],
+        _success,
+        doc="Path flown beyond the direct distance, over successful flights.",
+    ),
+    Metric(
+        "delay_s",
+        "delay s",
+        "mean",
+        False,
+        lambda r: r["flight_s"] - r["direct_s"],
+        _success,
+        doc="Flight time beyond the direct time, over successful flights.",
+    ),
+    Metric(
+        "manoeuvres",
+        "manoeuvres",
+        "mean",
+        False,
+        lambda r: r["manoeuvres"],
+        doc="Decisions other than hold, per flight.",
+    ),
+    Metric(
+        "nmac_per_flight_hour",
+        "NMAC / flight h",
+        "per_h",
+        False,
+        lambda r: r["nmac_events"],
+        lambda r: r["flight_s"],
+        doc="NMAC events per flight hour.",
+    ),
+)
+
+_REGISTRY: dict[str, Metric] = {m.key: m for m in _BUILTIN}
+_RESERVED = {"episodes"}
+
+
+class MetricView(Sequence[Metric]):
+    """The registered metrics (those passing ``keep``), in registration order, read from the
+    registry at each use: a metric registered later is in every view."""
+
+    def __init__(self, keep: Callable[[Metric], bool] | None = None) -> None:
+        self._keep = keep
+
+    def _now(self) -> tuple[Metric, ...]:
+        ms = tuple(_REGISTRY.values())
+        return ms if self._keep is None else tuple(m for m in ms if self._keep(m))
+
+    @overload
+    def __getitem__(self, i: int) -> Metric: ...
+    @overload
+    def __getitem__(self, i: slice) -> tuple[Metric, ...]: ...
+    def __getitem__(self, i: int | slice) -> Metric | tuple[Metric, ...]:
+        return self._now()[i]
+
+    def __len__(self) -> int:
+        return len(self._now())
+
+    def __iter__(self) -> Iterator[Metric]:
+        return iter(self._now())
+
+    def __repr__(self) -> str:
+        return f"MetricView({[m.key for m in self._now()]})"
+
+
+METRICS = MetricView()
+"""Every metric, in display order: the built-in ones (docs/model.md §10, §10.1), then those
+added with :func:`register_metric`."""
+MAIN_METRICS = MetricView(lambda m: not m.detail)
+"""The metrics that are columns of the leaderboard's pages and the docs' tables."""
+
+
+def register_metric(metric: Metric) -> Metric:
+    """Add a metric over the per-episode facts: from then on it is computed with every result
+    read (:func:`group_metrics`), is a column of the per-result tables (a detail column unless
+    ``detail=False``) and of ``leaderboard.json``, and ``cdr-bench compare`` compares it.
+    Nothing is written: result files hold facts only."""
+    if metric.key in _REGISTRY or metric.key in _RESERVED:
+        raise ValueError(f"metric {metric.key!r} is already defined")
+    _REGISTRY[metric.key] = metric
+    return metric
+
+
+def unregister_metric(key: str) -> None:
+    """Remove a metric added with :func:`register_metric` (the built-in ones stay)."""
+    if key in {m.key for m in _BUILTIN}:
+        raise ValueError(f"metric {key!r} is built in")
+    if key not in _REGISTRY:
+        raise KeyError(f"no metric {key!r}")
+    del _REGISTRY[key]
+
+
+def get_metric(key: str) -> Metric:
+    """The registered metric ``key`` (:class:`KeyError` if none)."""
+    return _REGISTRY[key]
+
+
 def group_metrics(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Every metric over a list of per-aircraft episode records (see the module docstring)."""
-    n = len(records)
+    """Every registered metric over a list of per-aircraft episode records (see the module
+    docstring), after ``episodes``."""
     outcome = [r["outcome"] for r in records]
     unknown = set(outcome) - set(OUTCOMES)
     if unknown:
         raise ValueError(f"unknown outcome(s) {sorted(unknown)}; expected one of {OUTCOMES}")
-    out: dict[str, Any] = {"episodes": n}
-    for name in OUTCOMES:
-        out[RATE_KEYS[name]] = rate(sum(o == name for o in outcome), n)
-    los = [bool(r["los"]) for r in records]
-    out["los_rate"] = rate(sum(los), n)
-    out["clean_success_rate"] = rate(
-        sum(o == "success" and not lo for o, lo in zip(outcome, los, strict=True)), n
-    )
-    out["avg_steps_success"] = mean(
-        [r["steps"] for r, o in zip(records, outcome, strict=True) if o == "success"]
-    )
-    out["goal_reward"] = mean([r["goal_reward"] for r in records])
-    out["safety_reward"] = mean([r["safety_reward"] for r in records])
-    decisions = sum(int(r["steps"]) for r in records)
-    out["invalid_action_rate"] = rate(sum(int(r["invalid_actions"]) for r in records), decisions)
-
-    out["los_events"] = mean([r["los_events"] for r in records])
-    out["los_time_s"] = mean([r["los_s"] for r in records])
-    out["intrusion_severity"] = mean([r["severity"] for r in records if r["los"]])
-    out["conflicts"] = mean([r["conflicts"] for r in records])
-    ok = [r for r, o in zip(records, outcome, strict=True) if o == "success"]
-    out["extra_path_km"] = mean([r["path_km"] - r["direct_km"] for r in ok])
-    out["delay_s"] = mean([r["flight_s"] - r["direct_s"] for r in ok])
-    out["manoeuvres"] = mean([r["manoeuvres"] for r in records])
-    hours = sum(float(r["flight_s"]) for r in records) / 3600.0
-    out["nmac_per_flight_hour"] = poisson_rate(sum(int(r["nmac_events"]) for r in records), hours)
+    out: dict[str, Any] = {"episodes": len(records)}
+    for m in METRICS:
+        out[m.key] = m.compute(records)
     return out
 
 

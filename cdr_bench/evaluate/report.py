@@ -1,5 +1,6 @@
-"""Every results table of cdr-bench, with one column list (:data:`COLUMNS`) and one set of
-number formats. Pure functions of result data (this module reads no file and evaluates nothing):
+"""Every results table of cdr-bench, with one column list (:data:`COLUMNS`: the metric registry
+of :mod:`cdr_bench.evaluate.metrics`) and one set of number formats. Pure functions of result
+data (this module reads no file and evaluates nothing):
 
 * the summary printed by ``cdr-bench evaluate`` and the Markdown of ``cdr-bench report``;
 * the leaderboard's tables (per scenario, entries, published, published vs measured), laid out
@@ -21,50 +22,23 @@ from dataclasses import dataclass
 from typing import Any
 
 from cdr_bench.actions import decode
+from cdr_bench.evaluate.metrics import MAIN_METRICS, METRICS, Metric
 
+Column = Metric
+"""A column of the results tables is a registered metric (:class:`~cdr_bench.evaluate.metrics.
+Metric`: ``header``, ``key``, ``kind`` (its number format: ``rate`` in %, ``mean``, ``per_h``),
+``higher``, ``detail``, ``short``)."""
 
-@dataclass(frozen=True)
-class Column:
-    header: str
-    key: str
-    """Metric key in a result's ``metrics`` (and in ``cdr-bench compare``)."""
-    kind: str
-    """``rate`` (a fraction, shown in %) or ``mean``."""
-    higher: bool
-    """Higher is better."""
-    detail: bool = False
-    """Only in the full per-result tables (``cdr-bench evaluate --wide`` / ``report``)."""
-    short: str = ""
-    """Header of the compact terminal summary; empty: not in it."""
+COLUMNS: Sequence[Column] = METRICS
+"""The one column list, read from the metric registry at each use
+(:data:`cdr_bench.evaluate.metrics.METRICS`): the paper's five metrics, clean success, the goal
+and safety rewards, the share of masked (invalid) actions, two outcome details and the field
+metrics (docs/model.md §10.1; per flight unless stated), then any metric added with
+:func:`~cdr_bench.evaluate.metrics.register_metric`."""
 
-
-COLUMNS: tuple[Column, ...] = (
-    Column("success", "success_rate", "rate", True, short="success"),
-    Column("LoS", "los_rate", "rate", False, short="LoS"),
-    Column("NMAC", "nmac_rate", "rate", False, short="NMAC"),
-    Column("timeout", "timeout_rate", "rate", False, short="timeout"),
-    Column("ended by LoS", "los_terminated_rate", "rate", False, detail=True),
-    Column("boundary", "boundary_rate", "rate", False, detail=True),
-    Column("steps (success)", "avg_steps_success", "mean", False, short="steps"),
-    Column("clean success", "clean_success_rate", "rate", True, short="clean"),
-    Column("R_G", "goal_reward", "mean", True),
-    Column("R_S", "safety_reward", "mean", True),
-    Column("invalid", "invalid_action_rate", "rate", False),
-    Column("LoS events", "los_events", "mean", False, detail=True),
-    Column("LoS time s", "los_time_s", "mean", False, detail=True),
-    Column("severity", "intrusion_severity", "mean", False, detail=True),
-    Column("conflicts", "conflicts", "mean", False, detail=True),
-    Column("extra path km", "extra_path_km", "mean", False, detail=True),
-    Column("delay s", "delay_s", "mean", False, detail=True),
-    Column("manoeuvres", "manoeuvres", "mean", False, detail=True),
-    Column("NMAC / flight h", "nmac_per_flight_hour", "per_h", False, detail=True),
-)
-"""The one column list: the paper's five metrics, clean success, the goal and safety rewards,
-the share of masked (invalid) actions, two outcome details and the field metrics
-(docs/model.md §10.1; per flight unless stated)."""
-
-MAIN_COLUMNS: tuple[Column, ...] = tuple(c for c in COLUMNS if not c.detail)
-"""The columns of the leaderboard and of the documentation tables."""
+MAIN_COLUMNS: Sequence[Column] = MAIN_METRICS
+"""The columns of the leaderboard and of the documentation tables (the metrics that are not
+detail columns)."""
 
 DENSITIES = ("low", "medium", "high")
 LATENCY_HEADER = "latency ms med / p99"
@@ -243,8 +217,12 @@ def _transitions(b: dict[str, Any] | None) -> int | None:
     return t if isinstance(t, int) or t is None else t[0]
 
 
-_KIND = {c.key: c.kind for c in COLUMNS}
-_HEADER = {c.key: c.header for c in COLUMNS}
+def _kinds() -> dict[str, str]:
+    return {c.key: c.kind for c in COLUMNS}
+
+
+def _headers() -> dict[str, str]:
+    return {c.key: c.header for c in COLUMNS}
 
 
 def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
@@ -254,14 +232,15 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     rk = data["ranking"]
     ent = {e["name"]: e for e in data["entries"]}
     five = list(rk["rows"][0]["metrics"]) if rk["rows"] else []
+    header, kind = _headers(), _kinds()
     head = [
         "#",
         "entry",
         "group",
-        f"{_HEADER[rk['metric']]} ({rk['scenario']})",
+        f"{header[rk['metric']]} ({rk['scenario']})",
         "vs row above",
-        _HEADER[rk["tie_break"]],
-        *[_HEADER[k] for k in five],
+        header[rk["tie_break"]],
+        *[header[k] for k in five],
         "training transitions",
         "seeds",
     ]
@@ -281,7 +260,7 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
                 Cell(fmt_metric("mean", tb), tb["value"]),
             ]
             + [
-                Cell(fmt_value(_KIND[k], r["metrics"][k]["value"]), r["metrics"][k]["value"])
+                Cell(fmt_value(kind[k], r["metrics"][k]["value"]), r["metrics"][k]["value"])
                 for k in five
             ]
             + [
@@ -510,7 +489,7 @@ def published_table(
 
 def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], Rows]]:
     names = {e["name"]: e["display_name"] for e in data["entries"]}
-    kinds = {c.key: c.kind for c in COLUMNS}
+    kinds = _kinds()
     by_entry: dict[tuple[str, str], list[dict[str, Any]]] = {}  # (entry, paper row): blocks
     for block in data["published_vs_measured"]:
         by_entry.setdefault((block["entry"], block["published_as"]), []).append(block)
@@ -547,7 +526,7 @@ def _result_rows(
 ) -> Rows:
     rows = []
     latency = result.get("timing", {}).get("decision_latency", {})
-    cols = [c for c in COLUMNS if c.short] if compact else COLUMNS
+    cols = [c for c in COLUMNS if c.short] if compact else list(COLUMNS)
     for sc in result["scenarios"]:
         lat = fmt_latency(latency.get(sc["id"], {}).get("per_decision_ms"))
         for role, m in sc["metrics"].items():
@@ -558,8 +537,12 @@ def _result_rows(
     return rows
 
 
-_RESULT_HEAD = ["scenario", "aircraft", "episodes", *[c.header for c in COLUMNS], LATENCY_HEADER]
-_COMPACT_HEAD = ["scenario", "aircraft", "episodes", *[c.short for c in COLUMNS if c.short]]
+def _result_head() -> list[str]:
+    return ["scenario", "aircraft", "episodes", *[c.header for c in COLUMNS], LATENCY_HEADER]
+
+
+def _compact_head() -> list[str]:
+    return ["scenario", "aircraft", "episodes", *[c.short for c in COLUMNS if c.short]]
 
 
 def summary_text(result: dict[str, Any], wide: bool = False) -> str:
@@ -567,9 +550,9 @@ def summary_text(result: dict[str, Any], wide: bool = False) -> str:
     paper's five metrics and clean success in under 100 columns, or every column with
     ``wide``."""
     if wide:
-        table = text_table(_RESULT_HEAD, _result_rows(result, ci=False))
+        table = text_table(_result_head(), _result_rows(result, ci=False))
     else:
-        table = text_table(_COMPACT_HEAD, _result_rows(result, ci=False, compact=True))
+        table = text_table(_compact_head(), _result_rows(result, ci=False, compact=True))
     return f"agent {result['agent']['name']} ({result['agent']['path']})\n{table}"
 
 
@@ -598,7 +581,7 @@ def report_markdown(results: list[tuple[str, dict[str, Any]]]) -> str:
         f"cdr-bench {r['versions'].get('cdr-bench')}"
         for p, r in results
     )
-    table = md_table(["agent", *_RESULT_HEAD], rows, numeric_from=3)
+    table = md_table(["agent", *_result_head()], rows, numeric_from=3)
     return f"# cdr-bench results\n\n{REPORT_NOTE}\n\n{table}\n\nResult files:\n\n{files}\n"
 
 

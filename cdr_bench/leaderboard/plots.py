@@ -20,8 +20,12 @@ import numpy as np
 from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
 
 DPI = 80
-LABEL = {c.key: c.header for c in COLUMNS}
-KIND = {c.key: c.kind for c in COLUMNS}
+
+
+def _label(key: str) -> str:
+    """The column header of metric ``key`` (read from the registry when a plot is drawn)."""
+    return next(c.header for c in COLUMNS if c.key == key)
+
 
 OKABE_ITO = ("#000000", "#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7")
 """The Okabe-Ito palette (distinguishable with every common colour-vision deficiency), without
@@ -150,7 +154,7 @@ def _points(
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
     for i in range(1, len(tables)):
         ax.axvline(i - 0.5, color="0.85", lw=0.8)
-    ax.set_ylabel(f"{LABEL[key]}" + (" (%)" if kind == "rate" else ""))
+    ax.set_ylabel(f"{_label(key)}" + (" (%)" if kind == "rate" else ""))
     ax.set_title(title)
     finite = [abs(v) for v in seen if math.isfinite(v) and v != 0]
     if finite and max(finite) / max(min(finite), 1e-9) > 100 and kind == "mean":
@@ -448,7 +452,7 @@ def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
         if dens:
             for c in MAIN_COLUMNS:
                 out[f"{c.key}.png"] = _points(
-                    data, dens, c.key, c.kind, f"{LABEL[c.key]} per density (95 % intervals)"
+                    data, dens, c.key, c.kind, f"{_label(c.key)} per density (95 % intervals)"
                 )
             out["success_vs_density.png"] = _success_vs_density(data, dens)
             out["latency.png"] = _latency(data, dens)
