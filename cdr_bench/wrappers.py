@@ -1,15 +1,42 @@
 """Adapters for tools that want flat ``Box`` observations (SuperSuit, Stable-Baselines3).
 
-* :class:`FlatObservation` turns the ``{"observation", "action_mask"}`` dict of every agent of the
-  PettingZoo env into one float32 ``Box`` (the observation, optionally followed by the 27 mask
-  flags). SuperSuit's ``black_death_v3`` (needed because learning aircraft leave the episode)
-  requires this.
-* :func:`sb3_vec_env` is a Stable-Baselines3 ``VecEnv`` built natively on the batched
-  :class:`~cdr_bench.vector_env.VectorEnv` (no SuperSuit, no subprocesses); every controlled
-  aircraft of every episode is one slot (parameter sharing). :func:`vector_env_to_sb3` is the
-  adapter itself, which the trainers put on their training environment.
+Two ways to train one shared Stable-Baselines3 policy for every aircraft of a multi-agent
+scenario (``marl/*``: the ownship and the learning intruders):
 
-Stable-Baselines3 is imported lazily: it is a training extra.
+* :func:`sb3_vec_env` (preferred) is a Stable-Baselines3 ``VecEnv`` built natively on the
+  batched :class:`~cdr_bench.vector_env.VectorEnv`: every controlled aircraft of every episode is
+  one slot (parameter sharing), all episodes advance in one compiled call per step (no dict per
+  agent, no loop over copies of the env, no SuperSuit), it has sb3-contrib's ``action_masks``
+  (``MaskablePPO``), ``seed()`` and SB3's ``"episode"`` and ``"TimeLimit.truncated"`` infos.
+  :func:`vector_env_to_sb3` is the adapter itself, which the trainers put on their training
+  environment.
+* The SuperSuit chain (for a pipeline already built on SuperSuit): :class:`FlatObservation`
+  turns each agent's ``{"observation", "action_mask"}`` dict into one float32 ``Box`` (the
+  observation, optionally followed by the 27 mask flags); :class:`BlackDeath` keeps an aircraft
+  that has finished in the episode with a zero observation and zero reward until every aircraft
+  has finished (``pettingzoo_env_to_vec_env_v1`` needs a fixed set of agents; it replaces
+  SuperSuit's ``black_death_v3``, which in SuperSuit 3.11.0 ends the episode only when an agent
+  is terminated *and* truncated, so it steps an env without live agents); and
+  :func:`seedable_sb3` makes the result of ``concat_vec_envs_v1(..., base_class=
+  "stable_baselines3")`` seedable (SuperSuit 3.11.0's wrapper forwards ``seed()`` to a
+  Gymnasium vector env that has none, so ``PPO(..., seed=0)`` fails)::
+
+      import supersuit as ss
+      from stable_baselines3 import PPO
+
+      import cdr_bench
+      from cdr_bench.wrappers import BlackDeath, FlatObservation, seedable_sb3
+
+      env = BlackDeath(FlatObservation(cdr_bench.parallel_env("marl/low-2")))
+      venv = ss.pettingzoo_env_to_vec_env_v1(env)  # one slot per aircraft: 3 here
+      venv = ss.concat_vec_envs_v1(venv, 2, base_class="stable_baselines3")  # 2 episodes
+      venv = seedable_sb3(venv)
+      PPO("MlpPolicy", venv, n_steps=128, batch_size=128, seed=0).learn(768)  # one rollout
+
+  Its policy sees the mask as 27 input flags but cannot be masked (no ``action_masks``); a
+  masked action is not an error (its level change is not executed, docs/model.md §3.2).
+
+Stable-Baselines3 and SuperSuit are imported lazily: they are training extras.
 """
 
 from __future__ import annotations
@@ -32,7 +59,8 @@ class FlatObservation(BaseParallelWrapper):
     """Replace each agent's observation dict by a flat float32 Box.
 
     ``include_mask=True`` appends the 27 action-mask flags (as 0.0 / 1.0) after the observation,
-    so a policy without native masking can still see feasibility.
+    so a policy without native masking can still see feasibility. Agents that finish leave
+    ``agents`` as in the wrapped env; put :class:`BlackDeath` on top for SuperSuit.
     """
 
     def __init__(self, env: CDREnv, include_mask: bool = True):
@@ -66,6 +94,89 @@ class FlatObservation(BaseParallelWrapper):
     def step(self, actions: dict[str, Any]) -> Any:
         obs, rew, term, trunc, infos = self.env.step(actions)
         return self._flat(obs), rew, term, trunc, infos
+
+
+class BlackDeath(BaseParallelWrapper):
+    """Keep every agent in the episode until all have finished ("black death").
+
+    A finished aircraft stays in ``agents`` with a zero observation, reward 0.0, empty infos and
+    both flags False (its actions are ignored) until the last controlled aircraft finishes; that
+    step reports every agent with its own flags (terminated, or truncated at the horizon) and
+    ``agents`` becomes empty. The agent set is then fixed for the whole episode, which
+    SuperSuit's ``pettingzoo_env_to_vec_env_v1`` requires. Observations must be ``Box`` spaces
+    (wrap :class:`FlatObservation` first). A drop-in for SuperSuit's ``black_death_v3``, whose
+    3.11.0 release ends the episode only when an agent is both terminated and truncated.
+    """
+
+    def __init__(self, env: Any):
+        super().__init__(env)
+        for a in env.possible_agents:
+            if not isinstance(env.observation_space(a), spaces.Box):
+                raise TypeError(
+                    f"BlackDeath needs Box observations (wrap FlatObservation first); "
+                    f"{a}: {env.observation_space(a)}"
+                )
+        self.agents: list[str] = []
+        self._ended: dict[str, tuple[bool, bool]] = {}
+
+    def _zero(self, agent: str) -> np.ndarray:
+        return np.zeros_like(self.observation_space(agent).low)
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self.agents = list(self.env.agents)
+        self._ended = {}
+        return obs, infos
+
+    def step(self, actions: dict[str, Any]) -> Any:
+        if not self.agents:
+            raise RuntimeError("step() called after the episode ended; call reset() first")
+        live = self.env.agents
+        obs, rew, term, trunc, infos = self.env.step({a: actions[a] for a in live})
+        for a in live:
+            if term.get(a) or trunc.get(a):
+                self._ended[a] = (bool(term.get(a)), bool(trunc.get(a)))
+        done = not self.env.agents
+        out_obs = {a: obs[a] if a in obs else self._zero(a) for a in self.agents}
+        out_rew = {a: float(rew.get(a, 0.0)) for a in self.agents}
+        out_info = {a: infos.get(a, {}) for a in self.agents}
+        flags = {
+            a: self._ended.get(a, (False, False)) if done else (False, False) for a in self.agents
+        }
+        out_term = {a: f[0] for a, f in flags.items()}
+        out_trunc = {a: f[1] for a, f in flags.items()}
+        if done:
+            self.agents = []
+        return out_obs, out_rew, out_term, out_trunc, out_info
+
+
+def seedable_sb3(venv: Any) -> Any:
+    """SuperSuit's Stable-Baselines3 vector env (``concat_vec_envs_v1(..., base_class=
+    "stable_baselines3")``, or its ``base_class="gymnasium"`` form) with a working ``seed(s)``:
+    the next ``reset()`` resets copy i with seed s + i (SuperSuit 3.11.0's wrapper forwards
+    ``seed`` to a vector env that has no such method, so ``PPO(..., seed=0)`` fails)."""
+    return _seedable_class()(getattr(venv, "venv", venv))
+
+
+@functools.cache
+def _seedable_class() -> type:
+    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+    class SeedableSB3VecEnv(SB3VecEnvWrapper):
+        __doc__ = seedable_sb3.__doc__
+        _next_seed: int | None = None
+
+        def seed(self, seed: int | None = None) -> Sequence[int | None]:
+            self._next_seed = seed
+            return [None if seed is None else seed + i for i in range(self.num_envs)]
+
+        def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+            if seed is None:
+                seed, self._next_seed = self._next_seed, None
+            observations, self.reset_infos = self.venv.reset(seed=seed, options=options)
+            return observations
+
+    return SeedableSB3VecEnv
 
 
 def sb3_vec_env(

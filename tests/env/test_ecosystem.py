@@ -54,21 +54,68 @@ def test_sb3_vec_env_ppo_with_learning_intruders():
     assert venv.observation_space.contains(obs[0])
 
 
-def test_supersuit_pipeline_to_sb3():
-    """SuperSuit users keep FlatObservation: black death, Markov vector env, SB3 concat."""
+def _supersuit_venv(ss, n: int, scenario: str = "marl/low-2"):
+    from cdr_bench.wrappers import BlackDeath, FlatObservation, seedable_sb3
+
+    par = BlackDeath(FlatObservation(cdr_bench.parallel_env(scenario), include_mask=True))
+    vec = ss.pettingzoo_env_to_vec_env_v1(par)
+    return seedable_sb3(ss.concat_vec_envs_v1(vec, n, num_cpus=0, base_class="stable_baselines3"))
+
+
+def test_supersuit_pipeline_trains_sb3_past_episode_ends():
+    """SuperSuit's chain (FlatObservation, BlackDeath, Markov vector env, SB3 concat) trains a
+    seeded PPO through whole episodes of a multi-agent scenario: every aircraft's slot is done
+    together when its episode ends, and the same seed gives the same observations."""
     sb3 = pytest.importorskip("stable_baselines3")
     ss = pytest.importorskip("supersuit")
-    from cdr_bench.env import CDREnv
-    from cdr_bench.wrappers import FlatObservation
 
-    par = ss.black_death_v3(FlatObservation(CDREnv("marl/low-2"), include_mask=True))
-    vec = ss.pettingzoo_env_to_vec_env_v1(par)
-    venv = ss.concat_vec_envs_v1(vec, 2, num_cpus=0, base_class="stable_baselines3")
+    venv = _supersuit_venv(ss, 2)
     assert venv.num_envs == 6 and venv.observation_space.shape == (69,)
-    # No seed: SuperSuit's vector env has no seed() for SB3 to call.
-    model = sb3.PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, verbose=0)
-    model.learn(6 * 32)
-    assert model.num_timesteps >= 6 * 32
+    model = sb3.PPO("MlpPolicy", venv, n_steps=96, batch_size=96, n_epochs=1, seed=0, verbose=0)
+    model.learn(6 * 96)  # random-policy episodes of marl/low-2 last ~70-80 steps
+    assert model.num_timesteps >= 6 * 96
+
+    venv.seed(5)
+    first = venv.reset()
+    again = _supersuit_venv(ss, 2)
+    again.seed(5)
+    assert np.array_equal(first, again.reset())
+    rng = np.random.default_rng(0)
+    ends = 0
+    for _ in range(150):
+        obs, rewards, dones, infos = venv.step(rng.integers(0, 27, 6))
+        assert obs.shape == (6, 69) and np.isfinite(obs).all()
+        for e in range(2):  # an episode's three slots end together
+            assert len(set(dones[3 * e : 3 * e + 3].tolist())) == 1
+        for i in np.flatnonzero(dones):
+            assert infos[i]["terminal_observation"].shape == (69,)
+        ends += int(dones.sum()) // 3
+    assert ends >= 2
+
+
+def test_black_death_keeps_finished_aircraft_until_the_episode_ends():
+    from cdr_bench.wrappers import BlackDeath, FlatObservation
+
+    env = BlackDeath(FlatObservation(cdr_bench.parallel_env("marl/low-2"), include_mask=False))
+    obs, _ = env.reset(seed=0)
+    agents = list(env.possible_agents)
+    assert env.agents == agents and set(obs) == set(agents)
+    finished: set[str] = set()
+    while env.agents:
+        live = set(env.unwrapped.agents)
+        obs, rew, term, trunc, infos = env.step({a: 13 for a in agents})
+        assert set(obs) == set(rew) == set(term) == set(agents)
+        for a in finished:  # a finished aircraft: zero observation, no reward, no flag yet
+            assert not obs[a].any() and rew[a] == 0.0 and infos[a] == {}
+        finished |= live - set(env.unwrapped.agents)
+        if env.agents:
+            assert not any(term.values()) and not any(trunc.values())
+    assert finished == set(agents)
+    assert all(term[a] or trunc[a] for a in agents)  # the last step: each its own flags
+    with pytest.raises(RuntimeError, match="episode ended"):
+        env.step({a: 13 for a in agents})
+    with pytest.raises(TypeError, match="FlatObservation"):
+        BlackDeath(cdr_bench.parallel_env("marl/low-2"))
 
 
 def test_vec_env_seed_makes_resets_reproducible():
