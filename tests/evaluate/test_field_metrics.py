@@ -176,12 +176,15 @@ def test_traces_are_the_evaluated_episodes():
         assert t["dt_s"] == cfg.time.dt_s and t["los_km"] == cfg.separation.los_km
 
 
-def test_compare_of_chosen_metrics_equals_the_full_comparison():
+def test_compare_of_chosen_metrics_equals_the_full_comparison(tmp_path):
     from cdr_bench.errors import UserError
+    from cdr_bench.evaluate.api import evaluate, resolve_jobs
     from cdr_bench.evaluate.compare import compare
 
-    res = AGENTS.parent / "leaderboard" / "results"
-    a, b = res / "mvp.json", res / "direct.json"
+    jobs, _ = resolve_jobs(["high"], None, 8)
+    a, b = tmp_path / "mvp.json", tmp_path / "direct.json"
+    for name, out in (("mvp", a), ("direct", b)):
+        evaluate(AGENTS / name, jobs, out, batch_size=8, progress=False)
     full = compare(a, b, ["high"])["rows"]
     some = compare(a, b, ["high"], ["clean_success_rate", "extra_path_km"])["rows"]
     assert [r["metric"] for r in some] == ["clean_success_rate", "extra_path_km"]

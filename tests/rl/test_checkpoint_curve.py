@@ -24,6 +24,7 @@ def _module():
     return mod
 
 
+@pytest.mark.artefacts
 def test_one_line_per_checkpoint_as_the_agent_scores(capsys) -> None:
     mod = _module()
     cks = [AGENT / "seeds" / "2" / "checkpoint.pt", AGENT / "checkpoint.pt"]
@@ -42,18 +43,24 @@ def test_one_line_per_checkpoint_as_the_agent_scores(capsys) -> None:
 
 def test_bad_paths_are_errors(tmp_path: Path, capsys) -> None:
     mod = _module()
-    assert mod.main([str(tmp_path), str(AGENT / "checkpoint.pt")]) == 2
+    (tmp_path / "checkpoint.pt").write_bytes(b"weights")
+    assert mod.main([str(tmp_path), str(tmp_path / "checkpoint.pt")]) == 2
     assert mod.main([str(AGENT), str(tmp_path / "none.pt")]) == 2
     err = capsys.readouterr().err
     assert "no agent.py" in err and "no such checkpoint" in err
 
 
-def test_unreadable_or_foreign_checkpoints_are_one_line_errors(tmp_path: Path, capsys) -> None:
+def test_unreadable_checkpoint_is_a_one_line_error(tmp_path: Path) -> None:
     mod = _module()
     junk = tmp_path / "junk.pt"
     junk.write_text("not a checkpoint\n")
     with pytest.raises(SystemExit, match=r"junk\.pt: not a cdr-bench training checkpoint"):
         mod.main([str(AGENT), str(junk)])
+
+
+@pytest.mark.artefacts
+def test_foreign_checkpoint_is_a_one_line_error(capsys) -> None:
+    mod = _module()
     foreign = ROOT / "agents" / "ppo" / "checkpoint.pt"  # another algorithm's weights
     assert mod.main([str(AGENT), str(foreign), "--episodes", "2"]) == 2
     assert "agents/safe_dqn_x/agent.py cannot load it" in capsys.readouterr().err

@@ -180,6 +180,7 @@ def test_masked_classes_are_never_chosen():
     assert a.dtype == np.int64 and mask[np.arange(200), a].all()
 
 
+@pytest.mark.artefacts
 @pytest.mark.parametrize("path", DIFFUSION_CHECKPOINTS, ids=lambda p: p.stem)
 def test_shipped_diffusion_checkpoints_same_actions_on_simulator_states(path):
     pol = load_policy(str(path))
@@ -258,6 +259,7 @@ def _load(path: Path):
     return ck["config"], {k: v.numpy() for k, v in ck["state_dict"].items()}
 
 
+@pytest.mark.artefacts
 @pytest.mark.parametrize("name", ["ppo", "maskable_ppo", "td3", "rainbow", "safe_dqn_x"])
 def test_shipped_baselines_same_actions_on_simulator_states(name):
     from cdr_bench.rl import rainbow, safe_dqn
