@@ -185,7 +185,10 @@ class CDREnv(ParallelEnv):
     ``options={"episode_seed": s}`` sets the simulator seed directly.
     ``flat_infos=True`` makes ``infos[agent]`` the same numeric keys every step
     (``FLAT_INFO_KEYS``: each reward term, the counts of aircraft in LoS / NMAC, ``outcome`` as a
-    code), the form collectors such as TorchRL's ``PettingZooWrapper`` need. ``render_mode``:
+    code), the form collectors such as TorchRL's ``PettingZooWrapper`` need: TorchRL makes a
+    tensor of every info value and fails on the default infos' dict and string ("Could not infer
+    dtype of dict"), so use ``PettingZooWrapper(parallel_env("medium", flat_infos=True),
+    use_mask=True)``. ``render_mode``:
     ``"rgb_array"`` (512 x 512 x 3 uint8 top-down picture with legend, scale bar, time and
     outcome) or ``"human"`` (matplotlib window). The picture zooms to the encounter in scenarios
     that place aircraft around the ownship (the tactical ones) and shows the whole sector

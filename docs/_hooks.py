@@ -1,14 +1,19 @@
 """Build hooks of the documentation site (``hooks:`` and the mkdocstrings ``extensions:`` of
 mkdocs.yml). Not a page: ``exclude_docs`` keeps it out of the site.
 
-* Generated parts are written into pages at build time from where they live, so the site holds
-  no copy of them: ``<!-- cdr-bench: env-card -->`` (``CDREnv``'s docstring, as in the README),
-  ``<!-- cdr-bench: gymnasium-tasks -->`` (``cdr_bench.GYMNASIUM_TASKS``),
+* Generated parts are written into pages at build time from where they live:
+  ``<!-- cdr-bench: env-card -->`` (``CDREnv``'s docstring), ``<!-- cdr-bench: gymnasium-tasks
+  -->`` (``cdr_bench.GYMNASIUM_TASKS``), ``<!-- cdr-bench: scenario-fields -->`` (the schema),
   ``<!-- cdr-bench: section FILE "Heading" -->`` (the body of one section of a Markdown file of
   the repository, e.g. CONTRIBUTING.md) and ``<!-- cdr-bench: intro FILE -->`` (the text between
   its title and its first section). Links of included text are made relative to the page; a link
   to a file that is not part of the site becomes its path in code font; brackets that are not
   links are escaped. An unknown directive, file or heading fails the build.
+* Each directive is closed by ``<!-- cdr-bench: end -->``; what lies between is what a reader of
+  the page *in the repository* sees (GitHub shows no comment): the generated table itself for a
+  generator, a link to the section for an include. The site build replaces it. ``python
+  docs/_hooks.py`` rewrites it from the code, ``python docs/_hooks.py --check`` lists the pages
+  where it is stale (``tests/test_doc_blocks.py`` fails on them).
 * The generated leaderboard (``leaderboard/README.md``, its plots and ``index.html``) is added
   to the site as ``leaderboard/results.md`` and its files, read where it is committed.
 * :class:`RstToMarkdown` (a griffe extension) turns the reStructuredText idioms of the package's
@@ -260,18 +265,107 @@ GENERATORS = {
 INCLUDES = {"section": section, "intro": intro}
 
 
+END = "<!-- cdr-bench: end -->"
+PAIR = re.compile(
+    r"^<!-- cdr-bench: (?!end -->)([^\n]+?) -->\n(?:(.*?)\n)?<!-- cdr-bench: end -->$",
+    flags=re.MULTILINE | re.DOTALL,
+)
+
+
+def _split(directive: str, page: str) -> tuple[str, list[str]]:
+    name, *args = shlex.split(directive)
+    if name not in GENERATORS and name not in INCLUDES:
+        known = sorted(GENERATORS) + sorted(INCLUDES)
+        raise ValueError(f"{page}: unknown directive {directive!r} (known: {known})")
+    return name, args
+
+
 def _expand(m: re.Match[str], page: str) -> str:
-    name, *args = shlex.split(m.group(1))
+    """The site's text for one directive (with or without its end marker)."""
+    name, args = _split(m.group(1), page)
     if name in GENERATORS:
         return GENERATORS[name](*args)
-    if name in INCLUDES:
-        return _relink(INCLUDES[name](*args), args[0], page)
-    known = sorted(GENERATORS) + sorted(INCLUDES)
-    raise ValueError(f"{page}: unknown directive {m.group(0)!r} (known: {known})")
+    return _relink(INCLUDES[name](*args), args[0], page)
+
+
+def github_slug(heading: str) -> str:
+    """The anchor GitHub gives a heading (lower case, punctuation dropped, spaces to dashes)."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
+
+
+def repository_text(directive: str, page: str) -> str:
+    """What a reader of the page in the repository sees for one directive: the generated text
+    itself, or a link to the included part (``page`` is relative to ``docs/``)."""
+    name, args = _split(directive, page)
+    if name in GENERATORS:
+        return GENERATORS[name](*args)
+    source = args[0]
+    INCLUDES[name](*args)  # the file and heading exist
+    link = posixpath.relpath(source, posixpath.dirname(posixpath.join("docs", page)))
+    if name == "intro":
+        return f"*The introduction of [{source}]({link}), shown here on the documentation site.*"
+    anchor = f"{link}#{github_slug(args[1])}"
+    return f'*Section "{args[1]}" of [{source}]({anchor}), shown here on the documentation site.*'
+
+
+NOT_RUN = re.compile(r"^\s*<!-- not run:.*-->\s*$")
+
+
+def _drop_not_run_markers(text: str) -> str:
+    """The ``<!-- not run: ... -->`` lines above code blocks (tests/test_doc_blocks.py) are for
+    the repository's readers and tests; inside a list item, Python-Markdown would end the list
+    at them."""
+    out, fenced = [], False
+    for line in text.split("\n"):
+        if re.match(r"^\s*(```|~~~)", line):
+            fenced = not fenced
+        if fenced or not NOT_RUN.match(line):
+            out.append(line)
+    return "\n".join(out)
+
+
+def page_markdown(markdown: str, page: str) -> str:
+    """A page as the site shows it: every directive (and what lies up to its end marker)
+    replaced by its generated or included text, and no not-run markers."""
+    text = PAIR.sub(lambda m: _expand(m, page), markdown)
+    if re.search(rf"^{re.escape(END)}$", text, flags=re.MULTILINE):
+        raise ValueError(f"{page}: {END} without a directive before it")
+    return _drop_not_run_markers(DIRECTIVE.sub(lambda m: _expand(m, page), text))
+
+
+def repository_markdown(markdown: str, page: str) -> str:
+    """A page as it should be committed: every directive closed by its end marker, with the
+    current repository text between them."""
+
+    def fill(m: re.Match[str]) -> str:
+        text = repository_text(m.group(1), page)
+        return f"<!-- cdr-bench: {m.group(1)} -->\n\n{text}\n\n{END}"
+
+    text = PAIR.sub(fill, markdown)
+    parts = re.split(
+        r"(^<!-- cdr-bench: [^\n]+? -->\n.*?^<!-- cdr-bench: end -->$)",
+        text,
+        flags=re.MULTILINE | re.DOTALL,
+    )
+    for i in range(0, len(parts), 2):  # outside the pairs: lone directives get their end
+        parts[i] = DIRECTIVE.sub(fill, parts[i])
+    return "".join(parts)
+
+
+def stale_pages(docs: Path = REPO / "docs") -> list[str]:
+    """Pages under ``docs`` whose committed generated parts are not what the code gives now."""
+    stale = []
+    for path in sorted(docs.rglob("*.md")):
+        page = path.relative_to(docs).as_posix()
+        text = path.read_text(encoding="utf-8")
+        if repository_markdown(text, page) != text:
+            stale.append(page)
+    return stale
 
 
 def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
-    return DIRECTIVE.sub(lambda m: _expand(m, page.file.src_uri), markdown)
+    return page_markdown(markdown, page.file.src_uri)
 
 
 def on_files(files: Any, config: Any) -> Any:
@@ -283,3 +377,34 @@ def on_files(files: Any, config: Any) -> Any:
     for site_path, repo_path in entries.items():
         files.append(File.generated(config, site_path, abs_src_path=str(REPO / repo_path)))
     return files
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(
+        description="Rewrite the generated parts of the pages under docs/ (between "
+        "'<!-- cdr-bench: NAME -->' and '<!-- cdr-bench: end -->') from the code."
+    )
+    p.add_argument("--check", action="store_true", help="only list stale pages (exit code 1)")
+    a = p.parse_args(argv)
+    if a.check:
+        stale = stale_pages()
+        for page in stale:
+            print(f"stale: docs/{page} (run: python docs/_hooks.py)")
+        return 1 if stale else 0
+    docs = REPO / "docs"
+    for path in sorted(docs.rglob("*.md")):
+        text = path.read_text(encoding="utf-8")
+        new = repository_markdown(text, path.relative_to(docs).as_posix())
+        if new != text:
+            path.write_text(new, encoding="utf-8")
+            print(f"wrote {path.relative_to(REPO)}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.path.insert(0, str(REPO))
+    sys.exit(main())

@@ -4,7 +4,7 @@ ownship and the learning intruders of ``marl/low-2``, on cdr-bench's RLlib adapt
 flown greedily on fresh episodes. Needs the ray extra (``pip install -e ".[ray]"``).
 
     python docs/tutorials/rllib_ppo.py                                    # 50 iterations
-    python docs/tutorials/rllib_ppo.py --iterations 1 --batch 128 --eval-episodes 2   # the test
+    python docs/tutorials/rllib_ppo.py --iterations 1 --batch 128 --eval-episodes 2   # smoke run
 """
 
 from __future__ import annotations
@@ -88,16 +88,21 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--scenario", default="marl/low-2", help="a scenario with learning intruders")
     p.add_argument("--iterations", type=int, default=50)
     p.add_argument("--batch", type=int, default=4000, help="env steps per iteration")
-    p.add_argument("--minibatch", type=int, default=256)
+    p.add_argument(
+        "--minibatch", type=int, default=None, help="SGD minibatch (default: 256, at most --batch)"
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-episodes", type=int, default=20)
     p.add_argument("--out", default="runs/rllib-tutorial", help="RLlib's logs and the checkpoint")
     a = p.parse_args(argv)
+    minibatch = min(256, a.batch) if a.minibatch is None else a.minibatch
+    if not 0 < minibatch <= a.batch:
+        p.error(f"--minibatch must be in 1..--batch ({a.batch}), got {minibatch}")
     out = Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
 
     ray.init(num_cpus=1, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
-    algo = ppo_config(a.scenario, a.batch, a.minibatch, a.seed).build_algo(
+    algo = ppo_config(a.scenario, a.batch, minibatch, a.seed).build_algo(
         logger_creator=lambda cfg: UnifiedLogger(cfg, str(out / "logs"), loggers=None)
     )
     try:
