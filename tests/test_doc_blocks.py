@@ -402,21 +402,29 @@ def test_generated_parts_of_the_pages_are_current():
 SECTION_REF = re.compile(r"(?<![\w/.-])(README|CONTRIBUTING)(?:\.md)?(?:'s)?,?\s+\"([^\"]{1,60})\"")
 
 
-def _headings(source: str) -> set[str]:
+def _headings(source: str, run_in: bool = False) -> set[str]:
+    """The headings of a Markdown file; with ``run_in``, also the bold words that open a
+    paragraph (``**How the leaderboard ranks.**``), which CONTRIBUTING.md uses as sections."""
     text = (ROOT / source).read_text(encoding="utf-8")
     text = re.sub(r"^```.*?^```", "", text, flags=re.M | re.S)
-    return {m.strip() for m in re.findall(r"^#+ (.+)$", text, flags=re.MULTILINE)}
+    heads = {m.strip() for m in re.findall(r"^#+ (.+)$", text, flags=re.MULTILINE)}
+    if run_in:
+        heads |= {m.strip() for m in re.findall(r"^\*\*([^*\n]+?)\.?\*\*", text, flags=re.M)}
+    return heads
 
 
 def test_section_references_resolve():
-    """'README, "Section"' and 'CONTRIBUTING.md, "Section"' name headings that exist, in the
-    docs, in the tutorial scripts and in the agent template (which points to README's
-    "Observation Space")."""
+    """'README, "Section"' and 'CONTRIBUTING.md, "Section"' name headings (or a paragraph's bold
+    opening words) that exist, in the docs, in the tutorial scripts and in the agent template
+    (which points to README's "Observation Space")."""
     sources = DOC_FILES + [
         p.relative_to(ROOT).as_posix()
         for p in [*(ROOT / "docs" / "tutorials").glob("*.py"), ROOT / "agents/template/agent.py"]
     ]
-    heads = {"README": _headings("README.md"), "CONTRIBUTING": _headings("CONTRIBUTING.md")}
+    heads = {
+        "README": _headings("README.md", run_in=True),
+        "CONTRIBUTING": _headings("CONTRIBUTING.md", run_in=True),
+    }
     missing = []
     for source in sources:
         text = (ROOT / source).read_text(encoding="utf-8")
