@@ -20,6 +20,32 @@ auto-reset    optional: an episode whose last aircraft finished restarts within 
 Episode seeds: :meth:`VectorEnv.reset` takes one seed per episode (``seeds=``), or draws them from
 a stream seeded by ``seed=``; auto-reset draws from the same stream. The seed of the episode in
 slot ``e`` is ``episode_seeds[e]``. No mutable state is shared between instances.
+
+State: besides what a step returns, the current state is public through read-only properties,
+so that nothing outside the environments reads the simulator (a test enforces it). They are
+*live views*: they follow the episodes as they step and restart (``.copy()`` one to keep its
+values), and writing to them raises. ``flying`` alone is a fresh copy.
+
+=====================  ======================================================================
+property               shape and meaning
+=====================  ======================================================================
+flying                 ``(E, M)`` bool: the controlled aircraft in the sky now (a copy)
+positions_km           ``(E, M, 2)`` float64: position (x east, y north) in km
+goals_km               ``(E, M, 2)`` float64: goal position in km
+heading_vectors        ``(E, M, 2)`` float64: unit vector of the heading (east, north)
+speeds_kt              ``(E, M)`` float64: airspeed in kt
+levels                 ``(E, M)`` int64: flight level index 0..2
+outcomes               ``(E, M)`` int8: outcome code (:data:`cdr_bench.sim.OUTCOME_NAMES`) of a
+                       finished flight, 0 while flying
+episode_steps          ``(E,)`` int64: steps taken by the episode since it started
+n_background           ``B``: background aircraft slots per episode
+n_aircraft             ``N = B + M``: every aircraft slot, background first, then the controlled
+                       aircraft (slot ``B + m``): the last axis of ``conflicts()`` and of the
+                       step's ``los_with`` / ``nmac_with``
+aircraft_positions_km  ``(E, N, 2)`` float64: position of every aircraft slot, in km
+aircraft_levels        ``(E, N)`` int64: level of every aircraft slot
+aircraft_in_sky        ``(E, N)`` bool: the slot holds an aircraft in the sky now
+=====================  ======================================================================
 """
 
 from __future__ import annotations
@@ -65,6 +91,13 @@ def _is_int(value: object, least: int) -> bool:
         and not isinstance(value, (bool, np.bool_))
         and bool(value >= least)
     )
+
+
+def _read_only(a: NDArray[Any]) -> NDArray[Any]:
+    """A view of ``a`` that cannot be written (``a`` itself stays writable)."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def agent_ids(config: ScenarioConfig) -> list[str]:
@@ -141,6 +174,11 @@ class VectorStep:
 
 class VectorEnv:
     """``num_envs`` episodes of one scenario in lock-step (see the module docstring).
+
+    What a step returns is in :class:`VectorStep`; the current state (positions, goals,
+    headings, speeds, levels, outcomes, step counters, every aircraft slot) in read-only
+    properties, listed in the module docstring's *State* table. They are the public face of the
+    state: code outside the environments does not read ``sim``.
 
     Args:
         scenario: a registry name, a YAML path or a :class:`ScenarioConfig`.
@@ -282,12 +320,76 @@ class VectorEnv:
             )
         return a.astype(np.int64, copy=False)
 
-    # -- state -----------------------------------------------------------------------------------
+    # -- state (see the module docstring: live read-only views, except ``flying``) ----------------
 
     @property
     def flying(self) -> NDArray[np.bool_]:
-        """(E, M) aircraft in the sky now."""
+        """(E, M) aircraft in the sky now (a copy)."""
         return self.sim.ac_active.copy()
+
+    @property
+    def positions_km(self) -> NDArray[np.float64]:
+        """(E, M, 2) position (x east, y north) of every controlled aircraft, km."""
+        return _read_only(self.sim.ac_pos_km)
+
+    @property
+    def goals_km(self) -> NDArray[np.float64]:
+        """(E, M, 2) goal position of every controlled aircraft, km."""
+        return _read_only(self.sim.ac_goal_km)
+
+    @property
+    def heading_vectors(self) -> NDArray[np.float64]:
+        """(E, M, 2) unit vector (east, north) of the heading of every controlled aircraft."""
+        return _read_only(self.sim.ac_dir)
+
+    @property
+    def speeds_kt(self) -> NDArray[np.float64]:
+        """(E, M) airspeed of every controlled aircraft, kt."""
+        return _read_only(self.sim.ac_speed_kt)
+
+    @property
+    def levels(self) -> NDArray[np.int64]:
+        """(E, M) flight level index (0..2) of every controlled aircraft."""
+        return _read_only(self.sim.ac_level)
+
+    @property
+    def outcomes(self) -> NDArray[np.int8]:
+        """(E, M) outcome code of every controlled aircraft (:data:`cdr_bench.sim.OUTCOME_NAMES`):
+        that of its finished flight, 0 while it flies."""
+        return _read_only(self.sim.ac_outcome)
+
+    @property
+    def episode_steps(self) -> NDArray[np.int64]:
+        """(E,) steps taken by each episode since it started (it stops counting when the
+        episode's last aircraft finishes)."""
+        return _read_only(self.sim.steps)
+
+    @property
+    def n_background(self) -> int:
+        """B: background aircraft slots per episode (slots ``0..B-1`` of the aircraft axis)."""
+        return int(self.sim.B)
+
+    @property
+    def n_aircraft(self) -> int:
+        """N = B + M: aircraft slots per episode, background first, then controlled aircraft
+        ``m`` in slot ``B + m`` (the last axis of :meth:`conflicts` and of ``los_with``)."""
+        return int(self.sim.N)
+
+    @property
+    def aircraft_positions_km(self) -> NDArray[np.float64]:
+        """(E, N, 2) position of every aircraft slot, km (a slot not in the sky keeps a stale
+        value: see :attr:`aircraft_in_sky`)."""
+        return _read_only(self.sim.pos_km)
+
+    @property
+    def aircraft_levels(self) -> NDArray[np.int64]:
+        """(E, N) flight level index of every aircraft slot."""
+        return _read_only(self.sim.level)
+
+    @property
+    def aircraft_in_sky(self) -> NDArray[np.bool_]:
+        """(E, N) the slot holds an aircraft in the sky now."""
+        return _read_only(self.sim.active)
 
     def observe(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
         """(E, M, F) observations and (E, M, 27) masks of the current state."""

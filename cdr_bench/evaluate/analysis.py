@@ -21,6 +21,7 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate.cli import add_agent_args, agent_options
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
 from cdr_bench.evaluate.results import atomic_write_text, check_output_path
+from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.runner import batch_seed, close_all, fault_message, load_for
 from cdr_bench.evaluate.search import FAMILIES, FAMILY_ACTIONS, search_families
 from cdr_bench.evaluate.seeds import episode_seeds
@@ -150,24 +151,23 @@ def first_action_distribution(
             raise UserError(fault_message(f, agent, f"reset(seed) on {config.id!r}")) from None
         first = None
         move = np.full(n, HOLD, dtype=np.int64)  # the first action other than hold
-        t = 0
-        act = np.full((n, env.n_agents), HOLD, dtype=np.int64)
-        flying = env.flying[:, 0]
-        while flying.any() and not (max_steps and t >= max_steps):
-            t += 1
-            act[:, 0] = HOLD
+
+        def decide(d: Decisions) -> Any:
             try:
-                act[flying, 0] = agent.act_batch(obs[flying, 0], masks[flying, 0])
-            except AgentFault as f:
-                raise UserError(fault_message(f, agent, f"{config.id!r}, step {t}")) from None
+                return agent.act_batch(d.obs, d.masks)
+            except AgentFault as fault:
+                at = f"{config.id!r}, step {d.t + 1}"
+                raise UserError(fault_message(fault, agent, at)) from None
+
+        def on_step(act: np.ndarray, _: Any) -> None:
+            nonlocal first, move
             if first is None:
                 first = act[:, 0].copy()
             move = np.where(move == HOLD, act[:, 0], move)
-            out = env.step(act)
-            obs, masks = out.obs, out.action_mask
-            flying = env.flying[:, 0]
+
+        fly(env, obs, masks, decide, drive="ownship", max_steps=max_steps, on_step=on_step)
         assert first is not None, "the scenario ended before the first decision"
-        ok = env.sim.ac_outcome[:, 0] == SUCCESS
+        ok = env.outcomes[:, 0] == SUCCESS
         for i, episode_seed in enumerate(chunk_seeds):
             rows = slice(i * samples, (i + 1) * samples)
             sampled, won = first[rows], ok[rows]

@@ -39,9 +39,10 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import HOLD, N_ACTIONS, decode, encode
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios.schema import ScenarioConfig
-from cdr_bench.sim.core import OUTCOME_NAMES, SUCCESS, Simulator
+from cdr_bench.sim.core import OUTCOME_NAMES, SUCCESS
 from cdr_bench.sim.geometry import exact_unit_vector
 from cdr_bench.vector_env import VectorEnv
 
@@ -88,27 +89,28 @@ def follow_on_family(
 
 
 def _follow_on_actions(
-    sim: Simulator, family: dict[str, NDArray[np.float64]], j: int
+    env: VectorEnv, family: dict[str, NDArray[np.float64]], j: int
 ) -> NDArray[np.int64]:
     """Ownship action of every episode ``j`` steps after the first action, shape (E,)."""
     turning = j < family["turn_steps"]
     steering = j >= family["turn_steps"] + family["hold_steps"]
+    own = env.config.ownship
     # Steer when the goal is more than half a heading step off the nose: with the goal vector g
     # and the heading vector u, cross = |g| sin(off) and dot = |g| cos(off), and off > half
     # exactly when sin(off - half) > 0 with sin(off) > 0 (no angle is computed).
-    g = sim.ac_goal_km[:, 0] - sim.ac_pos_km[:, 0]
-    u = sim.ac_dir[:, 0]
+    g = env.goals_km[:, 0] - env.positions_km[:, 0]
+    u = env.heading_vectors[:, 0]
     cross = g[:, 0] * u[:, 1] - g[:, 1] * u[:, 0]  # + : goal to the right
     dot = g[:, 0] * u[:, 0] + g[:, 1] * u[:, 1]
-    s_half, c_half = exact_unit_vector(0.5 * sim.heading_step_deg)
+    s_half, c_half = exact_unit_vector(0.5 * own.heading_step_deg)
     right = (cross > 0.0) & (cross * c_half - dot * s_half > 0.0)
     left = (cross < 0.0) & (-cross * c_half - dot * s_half > 0.0)
     steer = np.where(right, 1, np.where(left, -1, 0))
     a_psi = np.where(turning, family["turn"], np.where(steering, steer, 0))
-    dv = family["speed_kt"] - sim.ac_speed_kt[:, 0]
-    a_v = np.where(np.abs(dv) > 0.5 * sim.speed_step_kt, np.sign(dv), 0)
+    dv = family["speed_kt"] - env.speeds_kt[:, 0]
+    a_v = np.where(np.abs(dv) > 0.5 * own.speed_step_kt, np.sign(dv), 0)
     target_level = np.where(steering, family["final_level"], family["level"])
-    a_h = np.sign(target_level - sim.ac_level[:, 0])
+    a_h = np.sign(target_level - env.levels[:, 0])
     return (9 * (a_psi + 1) + 3 * (a_v + 1) + (a_h + 1)).astype(np.int64)
 
 
@@ -134,19 +136,22 @@ def search_batch(
     """
     E = len(first_actions)
     env = VectorEnv(config, num_envs=E)
-    env.reset(seeds=np.full(E, seed) if seeds is None else np.asarray(seeds))
-    sim = env.sim
-    played = np.full((E, sim.max_steps), HOLD, dtype=np.int64)
-    act = np.full((E, sim.M), HOLD, dtype=np.int64)
-    for t in range(sim.max_steps):
-        if not sim.ac_active[:, 0].any():
-            played = played[:, :t]
-            break
-        a = np.asarray(first_actions) if t == 0 else _follow_on_actions(sim, family, t - 1)
-        act[:, 0] = a
+    obs, masks = env.reset(seeds=np.full(E, seed) if seeds is None else np.asarray(seeds))
+    horizon = config.time.max_steps
+    played = np.full((E, horizon), HOLD, dtype=np.int64)
+
+    def decide(d: Decisions) -> NDArray[np.int64]:
+        # The follow-on of every episode is played (recorded) as computed; the simulator
+        # ignores those of the ownships that have finished.
+        t = d.t
+        a = np.asarray(first_actions) if t == 0 else _follow_on_actions(env, family, t - 1)
         played[:, t] = a
-        env.step(act)
-    return played, sim.ac_outcome[:, 0].copy(), sim.steps.copy()
+        return a[d.episodes]
+
+    flown = fly(env, obs, masks, decide, drive="ownship", max_steps=horizon)
+    if flown < horizon:
+        played = played[:, :flown]
+    return played, env.outcomes[:, 0].copy(), env.episode_steps.copy()
 
 
 def successful_first_actions(
@@ -320,11 +325,9 @@ def search_families(
     seeds_arr = np.asarray([int(x) for x in seeds], dtype=np.uint64)
     n = len(seeds_arr)
     env = VectorEnv(config, num_envs=max(n, 1))
-    if n:
-        env.reset(seeds=seeds_arr)
-    level = env.sim.ac_level[:n, 0].copy()
-    speed = env.sim.ac_speed_kt[:n, 0].copy()
-    masks = env.sim.action_masks()[:n, 0]
+    masks = env.reset(seeds=seeds_arr)[1][:, 0] if n else np.zeros((0, N_ACTIONS), np.int8)
+    level = env.levels[:n, 0].copy()
+    speed = env.speeds_kt[:n, 0].copy()
     # The candidates of every (episode, family): (first action, follow-on index) in order.
     todo: dict[tuple[int, str], list[tuple[int, int]]] = {}
     for e in range(n):
@@ -419,11 +422,9 @@ def hold_outcomes(config: ScenarioConfig, seeds: list[int]) -> NDArray[np.int8]:
     """Outcome code of the ownship holding course, speed and level (action 13) every step, one
     per episode seed."""
     env = VectorEnv(config, num_envs=len(seeds))
-    env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
-    act = np.full((len(seeds), env.n_agents), HOLD, dtype=np.int64)
-    while env.flying[:, 0].any():
-        env.step(act)
-    return env.sim.ac_outcome[:, 0].copy()
+    obs, masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
+    fly(env, obs, masks, lambda d: HOLD, drive="ownship")
+    return env.outcomes[:, 0].copy()
 
 
 def agent_outcomes(
@@ -449,14 +450,8 @@ def agent_outcomes(
         env = VectorEnv(config, num_envs=len(seeds))
         obs, masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
         agent.reset(batch_seed(base_seed, config.id, chash, b))
-        act = np.full((len(seeds), env.n_agents), HOLD, dtype=np.int64)
-        while env.flying[:, 0].any():
-            flying = env.flying[:, 0]
-            act[:, 0] = HOLD
-            act[flying, 0] = np.asarray(agent.act_batch(obs[flying, 0], masks[flying, 0]))
-            step = env.step(act)
-            obs, masks = step.obs, step.action_mask
-        out.append(env.sim.ac_outcome[:, 0].copy())
+        fly(env, obs, masks, lambda d: np.asarray(agent.act_batch(d.obs, d.masks)), drive="ownship")
+        out.append(env.outcomes[:, 0].copy())
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int8)
 
 
@@ -565,9 +560,8 @@ def _simple_successes(config: ScenarioConfig, seeds: list[int]) -> dict[str, int
         return {f: 0 for f in FAMILIES}
     n = len(seeds)
     env = VectorEnv(config, num_envs=n)
-    env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
-    level, speed = env.sim.ac_level[:, 0], env.sim.ac_speed_kt[:, 0]
-    masks = env.sim.action_masks()[:, 0]
+    masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))[1][:, 0]
+    level, speed = env.levels[:, 0], env.speeds_kt[:, 0]
     rows = [(e, f) for f in FAMILIES for e in range(n) if masks[e, SIMPLE_MANOEUVRES[f][0]]]
     result = {f: 0 for f in FAMILIES}
     if not rows:
@@ -589,11 +583,6 @@ def rollout(config: ScenarioConfig, actions: list[int], seed: int = 0, pad: int 
         The outcome name (``"success"``, ``"los"``, ``"nmac"``, ``"boundary"``, ``"timeout"``).
     """
     env = VectorEnv(config)
-    env.reset(seeds=[seed])
-    act = np.full((1, env.n_agents), HOLD, dtype=np.int64)
-    t = 0
-    while env.flying[0, 0]:
-        act[0, 0] = actions[t] if t < len(actions) else pad
-        env.step(act)
-        t += 1
-    return OUTCOME_NAMES[int(env.sim.ac_outcome[0, 0])]
+    obs, masks = env.reset(seeds=[seed])
+    fly(env, obs, masks, lambda d: actions[d.t] if d.t < len(actions) else pad, drive="ownship")
+    return OUTCOME_NAMES[int(env.outcomes[0, 0])]

@@ -185,7 +185,7 @@ class CurriculumEnv:
     def step(self, actions: NDArray[np.integer]) -> TrainStep:
         """Advance every episode by one step with (E, M) actions; restart the episodes that
         ended (on the next stage after a promotion)."""
-        env, sim = self.env, self.env.sim
+        env = self.env
         st = env.step(actions)
         res = st.result
         failed = (res.outcome == LOS) | (res.outcome == NMAC) | (res.outcome == BOUNDARY)
@@ -193,17 +193,20 @@ class CurriculumEnv:
         if self.los_penalty:
             penalty = penalty + self.los_penalty * self._separation_counts(res)
         truncated = st.truncated
+        flying = env.flying
         if self.max_episode_steps:
-            cut = np.flatnonzero((sim.steps >= self.max_episode_steps) & sim.ac_active.any(axis=1))
+            cut = np.flatnonzero((env.episode_steps >= self.max_episode_steps) & flying.any(axis=1))
             if cut.size:
                 truncated = truncated.copy()
-                truncated[cut] |= sim.ac_active[cut]
+                truncated[cut] |= flying[cut]
                 env.end_episodes(cut)
-        flight_ended = res.acting & ~sim.ac_active
-        ended = np.flatnonzero(~sim.ac_active.any(axis=1))
+                flying = env.flying
+        flight_ended = res.acting & ~flying
+        ended = np.flatnonzero(~flying.any(axis=1))
+        outcomes = env.outcomes
         promoted = False
         for e in ended:
-            code = int(sim.ac_outcome[e, 0])  # the ownship decides the episode
+            code = int(outcomes[e, 0])  # the ownship decides the episode
             self.outcomes.append(code)
             self.recent.append(code)
             self.episodes += 1

@@ -214,3 +214,38 @@ def test_bad_reset_arguments_are_argument_errors(kwargs, words):
     assert words in str(e.value)
     assert env.episode_seeds.tolist() == [7, 8]  # nothing restarted
     env.reset(seeds=np.array([2**64 - 1, 0], np.uint64))  # the whole range is accepted
+
+
+def test_the_state_properties_are_live_read_only_views_of_the_simulator():
+    env = VectorEnv("marl/medium-4", num_envs=3)
+    env.reset(seeds=[1, 2, 3])
+    sim = env.sim  # the test may look behind the env: the properties must show the same state
+    B, N, M = env.n_background, env.n_aircraft, env.n_agents
+    assert (B, N) == (sim.B, sim.N) and N == B + M
+    views = {
+        "positions_km": (env.positions_km, sim.ac_pos_km, (3, M, 2)),
+        "goals_km": (env.goals_km, sim.ac_goal_km, (3, M, 2)),
+        "heading_vectors": (env.heading_vectors, sim.ac_dir, (3, M, 2)),
+        "speeds_kt": (env.speeds_kt, sim.ac_speed_kt, (3, M)),
+        "levels": (env.levels, sim.ac_level, (3, M)),
+        "outcomes": (env.outcomes, sim.ac_outcome, (3, M)),
+        "episode_steps": (env.episode_steps, sim.steps, (3,)),
+        "aircraft_positions_km": (env.aircraft_positions_km, sim.pos_km, (3, N, 2)),
+        "aircraft_levels": (env.aircraft_levels, sim.level, (3, N)),
+        "aircraft_in_sky": (env.aircraft_in_sky, sim.active, (3, N)),
+    }
+    for name, (view, behind, shape) in views.items():
+        assert view.shape == shape and view.dtype == behind.dtype, name
+        assert np.shares_memory(view, behind) and not view.flags.writeable, name
+        with pytest.raises(ValueError):
+            view[...] = 0
+    assert sim.pos_km.flags.writeable  # only the views are read-only
+    positions, steps = env.positions_km, env.episode_steps
+    before = positions.copy()
+    env.step(np.full((3, M), HOLD))
+    assert (steps == 1).all() and not np.array_equal(positions, before)  # live
+    np.testing.assert_array_equal(env.aircraft_positions_km[:, B:], env.positions_km)
+    np.testing.assert_array_equal(env.aircraft_in_sky[:, B:], env.flying)
+    np.testing.assert_allclose(
+        np.hypot(env.heading_vectors[..., 0], env.heading_vectors[..., 1]), 1.0, rtol=1e-12
+    )
