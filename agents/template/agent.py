@@ -6,8 +6,9 @@ The protocol (see ``cdr_bench/evaluate/protocol.py``):
 
 * a class named ``Agent``, constructed as ``Agent(observation_space, action_space)`` with the
   environment's per-agent spaces: ``observation_space["observation"]`` is a ``Box(F,)`` float32
-  (F = 42 for the shipped scenarios; the index table is in the env card, README "Observation
-  Space"), ``observation_space["action_mask"]`` a ``Box(27,)`` int8, ``action_space`` is
+  (F = 42 for the shipped scenarios; the index table is in the README's environment card,
+  section "Observation Space", and in docs/environment.md),
+  ``observation_space["action_mask"]`` a ``Box(27,)`` int8, ``action_space`` is
   ``Discrete(27)``;
 * ``act(observation) -> int``: ``observation`` is the dict ``{"observation": (F,) float32,
   "action_mask": (27,) int8}``; return an action index 0..26 where index
@@ -23,17 +24,25 @@ is counted as invalid and its level change is not executed; anything that is not
 0..26 stops the evaluation with an error.
 
 A learned agent loads its weights relative to this file, without unpickling (the leaderboard
-refuses pickles and TorchScript archives), e.g. a state dict::
+refuses pickles and TorchScript archives), e.g. a PyTorch state dict::
 
     import torch
     CHECKPOINT = Path(__file__).parent / "policy.pt"      # torch.save(model.state_dict(), ...)
-    self.policy = MyNetwork()                               # defined in this file
+    self.policy = MyNetwork()                               # a torch.nn.Module defined here
     self.policy.load_state_dict(torch.load(CHECKPOINT, map_location="cpu", weights_only=True))
     self.policy.eval()
 
-(or safetensors, or ``numpy.load`` of an ``.npz``), and every file in this folder is hashed
-into the result, so a result names its checkpoint. The agent runs in its own process; it sees
-only observations and masks.
+(or safetensors, or ``numpy.load`` of an ``.npz``). Plain PyTorch is fine on the leaderboard:
+results are verified by replaying their recorded decisions through the simulator (exact, on
+any CPU), and your agent is asked again on a random sample of episodes, where at least 99 % of
+its decisions must match (another CPU's kernels may break a near tie the other way);
+CONTRIBUTING.md, "How a result is verified". ``cdr_bench.inference`` is an optional runtime of
+numba layers whose outputs are the same bits on every CPU, for agents that want 100 %.
+
+An entry's identity is the ``.py`` files of this folder, the checkpoint its submission names
+and the configuration files beside that checkpoint (or, with no checkpoint named, the weight and
+configuration files directly in this folder): a result names exactly what it scored. The agent
+runs in its own, sandboxed process; it sees only observations and masks.
 """
 
 from __future__ import annotations

@@ -182,7 +182,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         address=args.address,
     )
     print(summary_text(result, wide=args.wide))
-    print(f"wrote {out} and {out.with_suffix('.jsonl')}")
+    from cdr_bench.evaluate.results import episodes_path
+
+    print(f"wrote {out} and {episodes_path(out)}")
     return 0
 
 

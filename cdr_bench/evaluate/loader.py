@@ -55,26 +55,12 @@ def agent_name(path: str | os.PathLike[str]) -> str:
     return f.parent.name if f.name == "agent.py" else f.stem
 
 
-AGENT_FILE_SUFFIXES = (
-    ".py",
-    ".pt",
-    ".pth",
-    ".safetensors",
-    ".npz",
-    ".npy",
-    ".onnx",
-    ".ckpt",
-    ".bin",
-    ".pkl",
-    ".json",
-    ".yaml",
-    ".yml",
-    ".toml",
-    ".txt",
-)
-"""Files that can change what an agent does: code, weights and configuration. Documentation,
-logs, plots and result files in the agent's folder are not part of its identity, so writing an
-evaluation result inside the folder does not change the identity of the next run."""
+CODE_SUFFIXES = (".py",)
+CONFIG_SUFFIXES = (".json", ".yaml", ".yml", ".toml", ".txt")
+WEIGHT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz", ".npy", ".onnx", ".ckpt", ".bin", ".pkl")
+AGENT_FILE_SUFFIXES = CODE_SUFFIXES + CONFIG_SUFFIXES + WEIGHT_SUFFIXES
+"""Files that can change what an agent does: code, configuration and weights. Documentation,
+logs, plots and result files are never part of its identity."""
 
 _SKIP_AGENT_DIRS = _SKIP_DIRS | {"eval", "results", "analysis", "runs", "tuning"}
 
@@ -83,21 +69,42 @@ CHECKPOINT_ENV = "CDR_BENCH_CHECKPOINT"
 scores its ablations this way); when set, the file it names is part of the identity."""
 
 
-def agent_files(path: str | os.PathLike[str]) -> list[Path]:
-    """Files that make up the agent: its folder's code, weights and configuration (see
-    :data:`AGENT_FILE_SUFFIXES`) when the agent is a folder or a file named ``agent.py``, else
-    the single file. Folders ``eval``, ``results``, ``analysis``, ``runs`` and ``tuning`` hold
-    outputs and are skipped."""
+def _listing(folder: Path, suffixes: tuple[str, ...], recursive: bool) -> list[Path]:
+    out = []
+    for root, dirs, names in os.walk(folder):
+        dirs[:] = (
+            sorted(d for d in dirs if d not in _SKIP_AGENT_DIRS and not d.startswith("."))
+            if recursive
+            else []
+        )
+        out += [Path(root) / n for n in names if n.endswith(suffixes) and not n.startswith(".")]
+    return out
+
+
+def agent_files(
+    path: str | os.PathLike[str], checkpoint: str | os.PathLike[str] | None = None
+) -> list[Path]:
+    """The files an agent uses, which make up its identity (docs/agents.md, "Identity").
+
+    A single file that is not ``agent.py``: that file. An ``agent.py``: the code of its folder
+    (every ``.py`` below it, outside the output folders ``eval``, ``results``, ``analysis``,
+    ``runs`` and ``tuning``), and then, with no ``checkpoint`` named, the configuration and
+    weight files directly in its folder; with a ``checkpoint`` named, the configuration files
+    beside that checkpoint (the checkpoint itself is hashed by :func:`agent_identity`). So
+    re-training one seed, whose checkpoint lives in its own folder, changes the identity of the
+    runs that name that checkpoint and of no other."""
     f = resolve_agent_path(path)
     if f.name != "agent.py":
         return [f]
-    out = []
-    for root, dirs, names in os.walk(f.parent):
-        dirs[:] = sorted(d for d in dirs if d not in _SKIP_AGENT_DIRS and not d.startswith("."))
-        for n in sorted(names):
-            if n.endswith(AGENT_FILE_SUFFIXES) and not n.startswith("."):
-                out.append(Path(root) / n)
-    return sorted(out)
+    out = _listing(f.parent, CODE_SUFFIXES, recursive=True)
+    if checkpoint is None:
+        out += _listing(f.parent, CONFIG_SUFFIXES + WEIGHT_SUFFIXES, recursive=False)
+    else:
+        ck = Path(checkpoint).resolve()
+        out += [
+            p for p in _listing(ck.parent, CONFIG_SUFFIXES, recursive=False) if p.resolve() != ck
+        ]
+    return sorted(set(out))
 
 
 def file_sha256(p: Path) -> str:
@@ -112,6 +119,11 @@ def file_sha256(p: Path) -> str:
 _FROM_ENV = object()
 
 
+def _name(p: Path, base: Path) -> str:
+    """``p`` relative to the agent's folder (``../`` for a file outside it)."""
+    return Path(os.path.relpath(p.resolve(), base.resolve())).as_posix()
+
+
 def agent_identity(path: str | os.PathLike[str], checkpoint: Any = _FROM_ENV) -> dict[str, Any]:
     """Path, name and SHA-256 of every file of the agent (relative names), plus one combined
     hash over them (and over the checkpoint override, when there is one): identifies exactly
@@ -121,7 +133,14 @@ def agent_identity(path: str | os.PathLike[str], checkpoint: Any = _FROM_ENV) ->
     compute it for different agents at once (the leaderboard build's check does)."""
     f = resolve_agent_path(path)
     base = f.parent
-    files = {p.relative_to(base).as_posix(): file_sha256(p) for p in agent_files(path)}
+    override = os.environ.get(CHECKPOINT_ENV) if checkpoint is _FROM_ENV else checkpoint
+    if override:
+        override = os.fspath(override)
+        if not Path(override).is_file():
+            raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")
+    files = {
+        _name(p, base): file_sha256(p) for p in agent_files(path, override if override else None)
+    }
     lines = [f"{k} {v}" for k, v in sorted(files.items())]
     identity: dict[str, Any] = {
         "name": agent_name(path),
@@ -129,12 +148,8 @@ def agent_identity(path: str | os.PathLike[str], checkpoint: Any = _FROM_ENV) ->
         "entry": f.name,
         "files": files,
     }
-    override = os.environ.get(CHECKPOINT_ENV) if checkpoint is _FROM_ENV else checkpoint
     if override:
-        override = os.fspath(override)
         ck = Path(override)
-        if not ck.is_file():
-            raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")
         digest = file_sha256(ck)
         identity["checkpoint_override"] = {"path": override, "sha256": digest}
         lines.append(f"{CHECKPOINT_ENV} {digest}")

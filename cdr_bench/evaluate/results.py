@@ -1,25 +1,39 @@
-"""Result files: a JSON summary per run and a per-episode JSONL beside it, both written
-atomically (temporary file + ``os.replace``), and the partial checkpoint used by ``--resume``.
+"""Result files: a JSON of provenance per run and a per-episode log of facts beside it (gzip
+JSONL), both written atomically (temporary file + ``os.replace``), and the partial checkpoint
+used by ``--resume``.
 
-Layout of ``<out>.json`` (``schema_version`` 3)::
+Facts in files, metrics at read time: the files hold what happened (per episode and aircraft:
+outcome, steps, events, distances, and every decision taken); every metric, interval and table
+is computed when a result is read (:func:`read_result` adds ``metrics`` to each scenario from
+the per-episode log with :func:`cdr_bench.evaluate.metrics.scenario_metrics`). A new metric over
+facts already recorded needs no re-evaluation and no rewrite of a committed file.
+
+Layout of ``<out>.json`` (``schema_version`` 4)::
 
     schema_version, kind, agent {name, path, entry, files {name: sha256}, sha256},
     suite, base_seed, batch_size, seed_derivation, versions {cdr_bench, python, numpy, ...},
-    scenarios [{id, config_hash, config, episodes, seeds_sha256, metrics {ownship, intruders}}],
+    scenarios [{id, config_hash, config, episodes, seeds_sha256}],
     episodes_file, episodes_sha256, run_key,
     timing {wall_s, episodes_per_s, workers, resumed, decision_latency {per scenario}}
 
 Everything outside ``timing`` is a function of the agent's files, the scenarios, the base seed,
 the batch size and the package versions: an interrupted run finished with ``--resume`` (or a run
-with any ``--workers``) gives a byte-identical JSONL and a JSON identical outside ``timing``.
+with any ``--workers``) gives the same per-episode log and a JSON identical outside ``timing``.
 
-``<out>.jsonl``: one line per episode and scenario, sorted by scenario (in run order) then
-episode: ``{"scenario", "episode", "seed", "steps", "aircraft": [per-aircraft record]}``.
+``<out>.jsonl.gz``: gzip (no name, no time stamp) of one JSON line per episode and scenario,
+sorted by scenario (in run order) then episode: ``{"scenario", "episode", "seed", "steps",
+"aircraft": [per-aircraft record]}``; each aircraft record ends with ``actions``, its decisions
+one character each (:data:`cdr_bench.evaluate.runner.ACTION_CODE`), from which
+``leaderboard build --check`` replays the episode exactly.
 
-The two are one result: the JSON carries the SHA-256 of the JSONL (``episodes_sha256``) and
-every reader (:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a
-pair that does not match, e.g. a new JSONL beside an old JSON after a disk filled up between the
-two renames.
+Results of schema 3 (a plain ``.jsonl`` log without decisions; the archived runs under
+``sweeps/landed/``) are still read, metrics computed the same way; they cannot be replayed, and
+a leaderboard entry must be schema 4.
+
+The two are one result: the JSON carries the SHA-256 of the uncompressed log
+(``episodes_sha256``; of the text, so that another zlib's bytes do not matter) and every reader
+(:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a pair that does
+not match, e.g. a new log beside an old JSON after a disk filled up between the two renames.
 
 ``<out>.partial.jsonl`` (only while a run is unfinished): a header line with the ``run_key``,
 then one line per finished batch (appended and fsync'ed); a torn last line is ignored. Every
@@ -30,7 +44,9 @@ error, never merged.
 
 from __future__ import annotations
 
+import gzip
 import hashlib
+import io
 import json
 import os
 import platform
@@ -41,9 +57,9 @@ from pathlib import Path
 from typing import Any
 
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.loader import file_sha256
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
+EPISODES_SUFFIX = ".jsonl.gz"
 RESULT_KIND = "cdr-bench evaluation"
 
 
@@ -66,7 +82,7 @@ def package_versions() -> dict[str, str]:
 
 
 def episodes_path(out: Path) -> Path:
-    return out.with_suffix(".jsonl")
+    return out.with_suffix(EPISODES_SUFFIX)
 
 
 def partial_path(out: Path) -> Path:
@@ -90,18 +106,27 @@ def check_output_path(path: str | os.PathLike[str], flag: str = "--out") -> Path
     return p
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` so that readers see the old file or the new one, never a
-    part: temporary file in the same folder, fsync, ``os.replace``. A path that cannot be
-    written is a :class:`UserError` naming it."""
+def gzip_bytes(text: str) -> bytes:
+    """``text`` (UTF-8) as gzip with no file name and time stamp 0: the same text gives the
+    same bytes with the same zlib."""
+    buf = io.BytesIO()
+    with gzip.GzipFile(filename="", mode="wb", fileobj=buf, mtime=0, compresslevel=9) as f:
+        f.write(text.encode("utf-8"))
+    return buf.getvalue()
+
+
+def atomic_write_text(path: Path, text: str | bytes) -> None:
+    """Write ``text`` (or bytes) to ``path`` so that readers see the old file or the new one,
+    never a part: temporary file in the same folder, fsync, ``os.replace``. A path that cannot
+    be written is a :class:`UserError` naming it."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as e:
         raise UserError(f"{path}: cannot write it ({e.strerror or e})") from None
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            f.write(text.encode("utf-8") if isinstance(text, str) else text)
             f.flush()
             os.fsync(f.fileno())
         umask = os.umask(0)
@@ -204,18 +229,68 @@ class PartialLog:
         self.path.unlink(missing_ok=True)
 
 
+def strip_metrics(result: dict[str, Any]) -> dict[str, Any]:
+    """``result`` without what :func:`read_result` computes (each scenario's ``metrics``)."""
+    return {
+        **result,
+        "scenarios": [
+            {k: v for k, v in s.items() if k != "metrics"} for s in result.get("scenarios", [])
+        ],
+    }
+
+
 def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, Any]]) -> None:
-    """The per-episode JSONL first, then the JSON that names it and carries its SHA-256 (both
-    atomic); readers refuse a pair whose hashes differ."""
+    """The per-episode log first (gzip JSONL), then the JSON that names it and carries the
+    SHA-256 of its text (both atomic); readers refuse a pair whose hashes differ. Metrics are
+    not written: they are computed when the result is read."""
     text = jsonl_text(episodes)
-    result = {**result, "episodes_sha256": sha256_text(text)}
-    atomic_write_text(episodes_path(out), text)
+    result = {**strip_metrics(result), "episodes_sha256": sha256_text(text)}
+    atomic_write_text(episodes_path(out), gzip_bytes(text))
     atomic_write_text(out, json.dumps(result, indent=1) + "\n")
 
 
+def episodes_text(path: Path) -> str:
+    """The text of a per-episode log (gzip JSONL); ``ValueError`` naming it if unreadable."""
+    try:
+        with gzip.open(path, "rb") as f:
+            return f.read().decode("utf-8")
+    except (OSError, EOFError, UnicodeDecodeError, gzip.BadGzipFile) as e:
+        raise ValueError(f"{path}: not a gzip per-episode log ({e})") from None
+
+
+_EPISODES_CACHE: dict[tuple[str, str], list[dict[str, Any]]] = {}
+
+
+def _parse_episodes(path: Path, text: str, digest: str) -> list[dict[str, Any]]:
+    key = (str(path.resolve()), digest)
+    eps = _EPISODES_CACHE.get(key)
+    if eps is None:
+        try:
+            eps = [json.loads(line) for line in text.split("\n") if line.strip()]
+        except (json.JSONDecodeError, RecursionError) as e:
+            raise ValueError(f"{path}: a line is not JSON ({str(e)[:80]})") from None
+        if len(_EPISODES_CACHE) >= 4:
+            _EPISODES_CACHE.pop(next(iter(_EPISODES_CACHE)))
+        _EPISODES_CACHE[key] = eps
+    return eps
+
+
+def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    """``result`` with each scenario's ``metrics`` computed from its per-episode records."""
+    from cdr_bench.evaluate.metrics import scenario_metrics
+
+    by_id: dict[str, list[dict[str, Any]]] = {}
+    for e in episodes:
+        by_id.setdefault(e.get("scenario"), []).append(e)  # type: ignore[arg-type]
+    for s in result.get("scenarios", []):
+        s["metrics"] = scenario_metrics(by_id.get(s.get("id"), []))
+    return result
+
+
 def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """A result JSON, checked for kind and schema version, and against its per-episode JSONL
-    (present, same SHA-256); ``ValueError`` naming the file otherwise."""
+    """A result JSON, checked for kind and schema version, and against its per-episode log
+    (present, same SHA-256), with each scenario's ``metrics`` computed from the log;
+    ``ValueError`` naming the file otherwise."""
     p = Path(path)
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
@@ -229,23 +304,35 @@ def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ValueError(f"{p}: not a JSON result file ({str(e)[:80]})") from None
     if not isinstance(data, dict) or data.get("kind") != RESULT_KIND:
         raise ValueError(f"{p}: not a cdr-bench evaluation result")
-    if data.get("schema_version") != SCHEMA_VERSION:
+    legacy = data.get("schema_version") == 3  # archived runs: read, never replayable
+    if data.get("schema_version") != SCHEMA_VERSION and not legacy:
         raise ValueError(
             f"{p}: schema_version {str(data.get('schema_version'))[:20]!r}, this cdr-bench reads "
             f"{SCHEMA_VERSION} (re-run the evaluation)"
         )
     name = data.get("episodes_file")
-    if not isinstance(name, str) or "/" in name or "\\" in name or not name.endswith(".jsonl"):
-        raise ValueError(f"{p}: episodes_file: expected a .jsonl file name beside the result")
+    if (
+        not isinstance(name, str)
+        or "/" in name
+        or "\\" in name
+        or not name.endswith(".jsonl" if legacy else EPISODES_SUFFIX)
+    ):
+        raise ValueError(
+            f"{p}: episodes_file: expected a {EPISODES_SUFFIX} file name beside the result"
+        )
     ep = p.parent / name
     if not ep.is_file():
         raise ValueError(f"{p}: its per-episode file {ep} is missing")
-    if file_sha256(ep) != data.get("episodes_sha256"):
+    text = ep.read_text(encoding="utf-8") if legacy else episodes_text(ep)
+    digest = sha256_text(text)
+    if digest != data.get("episodes_sha256"):
         raise ValueError(
             f"{p}: its per-episode file {ep.name} does not match it (episodes_sha256 differs: "
             "an interrupted write or an edit); re-run the evaluation"
         )
-    return data
+    if not isinstance(data.get("scenarios"), list):
+        raise ValueError(f"{p}: scenarios: expected a list")
+    return add_metrics(data, _parse_episodes(ep, text, digest))
 
 
 def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:
@@ -253,5 +340,9 @@ def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -
     p = Path(result_path).parent / result["episodes_file"]
     if not p.exists():
         raise ValueError(f"{p}: per-episode file of {result_path} is missing")
-    with open(p, encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+    digest = str(result.get("episodes_sha256"))
+    cached = _EPISODES_CACHE.get((str(p.resolve()), digest))
+    if cached is not None:
+        return cached
+    text = p.read_text(encoding="utf-8") if p.suffix == ".jsonl" else episodes_text(p)
+    return _parse_episodes(p, text, sha256_text(text))

@@ -36,11 +36,12 @@ from cdr_bench.evaluate.remote import (
     AgentProcess,
     RemoteAgent,
 )
+from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig
 from cdr_bench.sim import OUTCOME_NAMES, observation_bounds
 from cdr_bench.sim.units import KM_PER_S_PER_KT
-from cdr_bench.vector_env import VectorEnv, observation_space
+from cdr_bench.vector_env import VectorEnv, VectorStep, observation_space
 
 __all__ = ["DEFAULT_DECISION_TIMEOUT_S", "run_batch", "run_batch_task", "load_for"]
 
@@ -64,18 +65,60 @@ def batch_seed(base_seed: int, scenario_id: str, config_hash: str, batch_index: 
 # One batch
 
 
+ACTION_CODE = "0123456789abcdefghijklmnopq"
+"""How a record stores its decisions: one character per decision, action ``a`` as
+``ACTION_CODE[a]`` (a base-27 digit: ``int(c, 27)`` decodes it)."""
+_CODE_BYTES = np.frombuffer(ACTION_CODE.encode(), dtype=np.uint8)
+_DECODE = np.full(256, -1, dtype=np.int16)
+_DECODE[_CODE_BYTES] = np.arange(N_ACTIONS)
+
+
+def encode_actions(actions: np.ndarray) -> str:
+    """The record string of a sequence of actions in 0..26."""
+    return _CODE_BYTES[np.asarray(actions, dtype=np.int64)].tobytes().decode("ascii")
+
+
+def decode_actions(code: str) -> np.ndarray:
+    """The actions of a record string; ``ValueError`` for a character that is not a code."""
+    try:
+        raw = np.frombuffer(code.encode("ascii"), dtype=np.uint8)
+    except (UnicodeEncodeError, AttributeError):
+        raise ValueError("actions: expected a string of characters 0-9, a-q") from None
+    out = _DECODE[raw]
+    if (out < 0).any():
+        raise ValueError("actions: expected a string of characters 0-9, a-q")
+    return out.astype(np.int64)
+
+
+class ReplayMismatch(Exception):
+    """A recorded episode cannot be replayed as recorded (it needs more or fewer decisions
+    than its record holds)."""
+
+
 def run_batch(
-    agent: RemoteAgent,
+    agent: RemoteAgent | None,
     config: ScenarioConfig,
     base_seed: int,
     batch_index: int,
     batch_size: int,
     n_episodes: int,
     trace: int = 0,
+    replay: list[list[str]] | None = None,
 ) -> dict[str, Any]:
     """Run batch ``batch_index`` of a scenario (episodes on the fixed grid, at most
     ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``,
-    plus ``"traces"`` (:func:`_frame`) of the batch's first ``trace`` episodes if ``trace``."""
+    plus ``"traces"`` (:func:`_frame`) of the batch's first ``trace`` episodes if ``trace``.
+
+    With ``replay`` (per episode of the batch, per controlled aircraft, the recorded
+    ``actions`` string), the recorded decisions are flown instead of the agent's: the records
+    come out identical to the recorded ones when the recording is honest (raises
+    :class:`ReplayMismatch` when an aircraft needs more decisions than recorded, or fewer). An
+    ``agent`` given with ``replay`` is asked at every step as usual (same observations, same
+    reset seed), and its choices are counted against the record in ``"agreement"``
+    (``decisions``, ``agree``, ``disagreements``: the first few as ``[episode, aircraft id,
+    decision index, recorded, re-run]``) without changing the flight; ``agent=None`` replays
+    only.
+    """
     chash = config.config_hash()
     start = batch_index * batch_size
     stop = min(start + batch_size, n_episodes)
@@ -83,16 +126,32 @@ def run_batch(
     E = stop - start
     env = VectorEnv(config, num_envs=E)
     obs_all, masks_all = env.reset(seeds=seeds)
-    try:
-        agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
-    except AgentFault as f:
-        at = f"reset(seed) before episodes {start}..{stop - 1} of scenario {config.id!r}"
-        raise AgentError(fault_message(f, agent, at)) from None
+    if agent is not None:
+        try:
+            agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
+        except AgentFault as f:
+            at = f"reset(seed) before episodes {start}..{stop - 1} of scenario {config.id!r}"
+            raise AgentError(fault_message(f, agent, at)) from None
     ids = env.agent_ids
     M = env.n_agents
+    cap = config.time.max_steps + 1
+    decisions = np.zeros((E, M, cap), dtype=np.int8)
+    n_dec = np.zeros((E, M), dtype=np.int64)
+    recorded_n = None
+    if replay is not None:
+        if len(replay) != E or any(len(r) != M for r in replay):
+            raise ReplayMismatch(f"the record of batch {batch_index} has another shape")
+        recorded_n = np.zeros((E, M), dtype=np.int64)
+        for e in range(E):
+            for m in range(M):
+                a = decode_actions(replay[e][m])[:cap]
+                decisions[e, m, : a.size] = a
+                recorded_n[e, m] = len(replay[e][m])
+    agree = 0
+    asked = 0
+    disagreements: list[list[Any]] = []
 
-    sim = env.sim
-    N = sim.N
+    N = env.n_aircraft
     dt_s = config.time.dt_s
     los_km = config.separation.los_km
     steps = np.zeros((E, M), dtype=np.int64)
@@ -115,62 +174,92 @@ def run_batch(
     in_conflict = env.conflicts()
     conflict_events += in_conflict.sum(axis=2)
     conflict_now = np.zeros_like(in_conflict)
-    start_km = sim.ac_pos_km.copy()
-    goal_km = sim.ac_goal_km.copy()
+    start_km = env.positions_km.copy()
+    goal_km = env.goals_km.copy()
     gap = goal_km - start_km
     goal_radius = config.ownship.goal_radius_km
     direct_km = np.maximum(_norm(gap) - goal_radius, 0.0)
     flight_s = np.zeros((E, M))
-    start_speed_km_s = sim.ac_speed_kt * KM_PER_S_PER_KT
-    traces = [_trace_head(config, sim, start + e, seeds[e], ids, e) for e in range(min(trace, E))]
+    start_speed_km_s = env.speeds_kt * KM_PER_S_PER_KT
+    traces = [_trace_head(config, env, start + e, seeds[e], ids, e) for e in range(min(trace, E))]
     for t in traces:
-        t["frames"].append(_frame(sim, t.pop("_row"), None))
+        t["frames"].append(_frame(env, t.pop("_row"), None))
     per_decision_ms: list[float] = []
     per_call_ms: list[float] = []
-    full = np.full((E, M), HOLD, dtype=np.int64)
-    flying = env.flying
-    episode_steps = env.sim.steps
+    episode_steps = env.episode_steps  # a live view
+    before_km = start_km.copy()
 
-    def where(row: int) -> str:
-        e, m = int(rows_e[row]), int(rows_m[row])
-        return (
-            f"scenario {config.id!r}, episode {start + e} (seed {seeds[e]}), "
-            f"step {int(episode_steps[e])}, {ids[m]}"
-        )
+    def decide(d: Decisions) -> np.ndarray:
+        """The actions of the flying aircraft ``d`` (the agent's, or the record's when
+        replaying), counted and recorded."""
+        nonlocal asked, agree
+        rows_e, rows_m, obs, masks = d.episodes, d.aircraft, d.obs, d.masks
 
-    while flying.any():
-        rows_e, rows_m = np.nonzero(flying)
-        obs = obs_all[rows_e, rows_m]
-        masks = masks_all[rows_e, rows_m]
-        n = rows_e.size
-        t0 = time.perf_counter()
-        try:
-            actions = agent.act_batch(obs, masks)
-        except AgentFault as f:
-            if f.kind == "raised" and f.row < 0 and n > 1:
-                f = agent.localise(obs, masks) or f
-            at = (
-                where(f.row)
-                if 0 <= f.row < n
-                else where(0) + (f" (one of {n} aircraft of the batch)" if n > 1 else "")
+        def where(row: int) -> str:
+            e, m = int(rows_e[row]), int(rows_m[row])
+            return (
+                f"scenario {config.id!r}, episode {start + e} (seed {seeds[e]}), "
+                f"step {int(episode_steps[e])}, {ids[m]}"
             )
-            raise AgentError(fault_message(f, agent, at)) from None
-        elapsed = time.perf_counter() - t0
-        per_call_ms.append(elapsed * 1e3)
-        per_decision_ms.append(elapsed * 1e3 / n)
 
-        full[:] = HOLD
-        full[rows_e, rows_m] = actions
-        manoeuvres += full != HOLD
-        before_km = sim.ac_pos_km.copy()
-        step = env.step(full)
+        n = rows_e.size
+        k = n_dec[rows_e, rows_m]
+        if recorded_n is not None:
+            short = k >= recorded_n[rows_e, rows_m]
+            if short.any():
+                raise ReplayMismatch(f"{where(int(np.argmax(short)))}: the record ends here")
+        if agent is not None:
+            t0 = time.perf_counter()
+            try:
+                actions = agent.act_batch(obs, masks)
+            except AgentFault as f:
+                if f.kind == "raised" and f.row < 0 and n > 1:
+                    f = agent.localise(obs, masks) or f
+                at = (
+                    where(f.row)
+                    if 0 <= f.row < n
+                    else where(0) + (f" (one of {n} aircraft of the batch)" if n > 1 else "")
+                )
+                raise AgentError(fault_message(f, agent, at)) from None
+            elapsed = time.perf_counter() - t0
+            per_call_ms.append(elapsed * 1e3)
+            per_decision_ms.append(elapsed * 1e3 / n)
+        if recorded_n is not None:
+            played = decisions[rows_e, rows_m, k].astype(np.int64)
+            if agent is not None:
+                same = np.asarray(actions) == played
+                asked += n
+                agree += int(same.sum())
+                for r in np.flatnonzero(~same)[: max(0, 20 - len(disagreements))]:
+                    disagreements.append(
+                        [
+                            start + int(rows_e[r]),
+                            ids[int(rows_m[r])],
+                            int(k[r]),
+                            int(played[r]),
+                            int(actions[r]),
+                        ]
+                    )
+            actions = played
+        else:
+            decisions[rows_e, rows_m, k] = actions
+        n_dec[rows_e, rows_m] += 1
+        return actions
+
+    def on_step(actions: np.ndarray, step: VectorStep) -> None:
+        """The step's part of every metric (and of the traces)."""
+        nonlocal steps, los, nmac, goal_r, safety_r, invalid, los_events, nmac_events
+        nonlocal los_steps, conflict_events, manoeuvres, path_km, flight_s
+        nonlocal before_km, prev_los, prev_nmac, in_conflict, conflict_now
+        manoeuvres += actions != HOLD
         res = step.result
-        obs_all, masks_all = step.obs, step.action_mask
         steps += res.acting
-        moved = sim.ac_pos_km - before_km
+        after_km = env.positions_km
+        moved = after_km - before_km
         part = np.where(res.reached_goal, _goal_entry(before_km, moved, goal_km, goal_radius), 1.0)
         path_km += np.where(res.acting, part * _norm(moved), 0.0)
         flight_s += np.where(res.acting, part * dt_s, 0.0)
+        before_km = after_km.copy()
         los_with, nmac_with = res.los_with, res.nmac_with
         los_events += (los_with & ~prev_los).sum(axis=2)
         nmac_events += (nmac_with & ~prev_nmac).sum(axis=2)
@@ -185,13 +274,14 @@ def run_batch(
         np.minimum(min_sep, res.min_sep_km, out=min_sep)
         done = res.outcome != 0
         outcome[done] = res.outcome[done]
-        flying = env.flying
         env.conflicts(conflict_now)
         conflict_events += (conflict_now & ~in_conflict).sum(axis=2)
         in_conflict, conflict_now = conflict_now, in_conflict
         for i, t in enumerate(traces):
             if res.acting[i].any():
-                t["frames"].append(_frame(sim, i, los_any[i]))
+                t["frames"].append(_frame(env, i, los_any[i]))
+
+    fly(env, obs_all, masks_all, decide, on_step=on_step)
 
     episodes = []
     for e in range(E):
@@ -223,6 +313,7 @@ def run_batch(
                     "direct_s": round(float(direct_km[e, m] / start_speed_km_s[e, m]), 4)
                     if start_speed_km_s[e, m] > 0
                     else None,
+                    "actions": encode_actions(decisions[e, m, : n_dec[e, m]]),
                 }
             )
         episodes.append(
@@ -233,6 +324,14 @@ def run_batch(
                 "aircraft": aircraft,
             }
         )
+    if recorded_n is not None:
+        extra = np.argwhere(n_dec != recorded_n)
+        if extra.size:
+            e, m = (int(x) for x in extra[0])
+            raise ReplayMismatch(
+                f"scenario {config.id!r}, episode {start + e}, {ids[m]}: the record holds "
+                f"{int(recorded_n[e, m])} decisions, the flight took {int(n_dec[e, m])}"
+            )
     for i, t in enumerate(traces):
         t["outcomes"] = [OUTCOME_NAMES[int(o)] for o in outcome[i]]
     out: dict[str, Any] = {
@@ -246,6 +345,8 @@ def run_batch(
     }
     if trace:
         out["traces"] = traces
+    if agent is not None and recorded_n is not None:
+        out["agreement"] = {"decisions": asked, "agree": agree, "disagreements": disagreements}
     return out
 
 
@@ -272,7 +373,7 @@ def _goal_entry(
 
 
 def _trace_head(
-    config: ScenarioConfig, sim: Any, episode: int, seed: int, ids: list[str], row: int
+    config: ScenarioConfig, env: VectorEnv, episode: int, seed: int, ids: list[str], row: int
 ) -> dict[str, Any]:
     """The fixed part of an episode's trace (``frames`` filled by :func:`_frame`)."""
     return {
@@ -283,29 +384,30 @@ def _trace_head(
         "size_km": config.sector.size_km,
         "los_km": config.separation.los_km,
         "ids": list(ids),
-        "goals_km": [[round(float(v), 2) for v in g] for g in sim.ac_goal_km[row]],
+        "goals_km": [[round(float(v), 2) for v in g] for g in env.goals_km[row]],
         "frames": [],
         "_row": row,
     }
 
 
-def _frame(sim: Any, e: int, los_any: Any) -> dict[str, Any]:
+def _frame(env: VectorEnv, e: int, los_any: Any) -> dict[str, Any]:
     """One frame of episode ``e``'s trace: controlled aircraft ``c`` as ``[x_km, y_km, level,
     flying]``, background aircraft in the sky ``b`` as ``[x_km, y_km, level]`` and ``los``, per
     controlled aircraft, 1 if it was in LoS during the step that led here (0 at the start)."""
-    B = sim.B
-    pos, level, active = sim.pos_km[e], sim.level[e], sim.active[e]
+    B, N = env.n_background, env.n_aircraft
+    pos, level = env.aircraft_positions_km[e], env.aircraft_levels[e]
+    active = env.aircraft_in_sky[e]
     return {
         "c": [
             [round(float(pos[n, 0]), 2), round(float(pos[n, 1]), 2), int(level[n]), int(active[n])]
-            for n in range(B, sim.N)
+            for n in range(B, N)
         ],
         "b": [
             [round(float(pos[n, 0]), 2), round(float(pos[n, 1]), 2), int(level[n])]
             for n in range(B)
             if active[n]
         ],
-        "los": [0] * (sim.N - B) if los_any is None else [int(x) for x in los_any],
+        "los": [0] * (N - B) if los_any is None else [int(x) for x in los_any],
     }
 
 

@@ -107,9 +107,28 @@ def seed_numba_cache(cache_dir: Path) -> None:
             shutil.copyfile(f, dest / f.name)
 
 
+CPU_KNOBS = (
+    "ATEN_CPU_CAPABILITY",
+    "NPY_DISABLE_CPU_FEATURES",
+    "NPY_ENABLE_CPU_FEATURES",
+    "OPENBLAS_CORETYPE",
+    "MKL_ENABLE_INSTRUCTIONS",
+    "MKL_CBWR",
+    "ONEDNN_MAX_CPU_ISA",
+    "DNNL_MAX_CPU_ISA",
+    "NUMBA_CPU_NAME",
+    "NUMBA_CPU_FEATURES",
+    "GLIBC_TUNABLES",
+)
+"""The scorer's own kernel settings (which SIMD kernels numpy, torch, BLAS and numba choose),
+passed on to a confined child when set: they describe the machine, and setting them is how a
+test makes one CPU compute like another."""
+
+
 def child_env(scratch: Path, extra: dict[str, str] | None = None) -> dict[str, str]:
     """The whole environment of a confined child."""
-    env = {
+    env = {k: os.environ[k] for k in CPU_KNOBS if k in os.environ}
+    env |= {
         "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
         "HOME": str(scratch),
         "TMPDIR": str(scratch),

@@ -36,10 +36,11 @@ the committed result files and is never re-measured by ``--check``.
 from __future__ import annotations
 
 import difflib
-import hashlib
 import json
 import os
+import random
 import re
+import secrets
 import shutil
 import sys
 import tempfile
@@ -78,6 +79,7 @@ from cdr_bench.leaderboard.data import (
 )
 from cdr_bench.leaderboard.published import load_published
 from cdr_bench.leaderboard.submission import Submission, load_submissions
+from cdr_bench.leaderboard.verify import MIN_AGREEMENT, agreement_verdict, batches_of
 
 PAPER_EPISODES = 1000
 BASE_SEED = 0
@@ -103,7 +105,12 @@ class Options:
     limits: Limits = field(default_factory=Limits)
     reference: str = DEFAULT_REFERENCE
     all_seeds: bool = False
-    """``--check``: re-evaluate every seed of every entry, not one sampled seed per entry."""
+    """``--check``: ask the agent of every training seed of every entry again, not the shown
+    seed and one drawn at random."""
+    sample_seed: int | None = None
+    """``--check``: the seed of the agent re-run sample (None: drawn at random, and printed)."""
+    rerun_batches: int = 1
+    """``--check``: batches of committed episodes per run on which the agent is asked again."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -215,15 +222,19 @@ def evaluate_submission(
     episodes: int,
     workers: int,
     limits: Limits,
+    rerun: dict[str, Any] | None = None,
 ) -> float:
-    """Write ``out_dir/<name>.json|.jsonl`` (and multimodality files) for one submission;
-    returns the wall time. :class:`SandboxError` / :class:`UserError` name the submission."""
+    """Write ``out_dir/<name>.json`` and its per-episode log (and multimodality files) for one
+    submission; returns the wall time. With ``rerun`` (``{"result", "batches", "out"}``)
+    nothing is scored: the agent is asked again along the committed episodes of those batches
+    (:mod:`.verify`) and the agreement written to ``rerun["out"]``. :class:`SandboxError` /
+    :class:`UserError` name the submission."""
     what = f"submission {sub.name} ({sub.source})"
     lb_dir = sub.source.resolve().parent.parent
     agent = _inside(root, sub.agent, what, "agent")
     if agent.is_relative_to(lb_dir):
         raise SandboxError(f"{what}: agent {sub.agent} lies inside the leaderboard folder")
-    for f in agent_files(agent):
+    for f in agent_files(agent, root / sub.checkpoint if sub.checkpoint else None):
         _inside(root, str(f), what, "agent file")
     env = dict(os.environ)
     env.pop("CDR_BENCH_CHECKPOINT", None)
@@ -275,6 +286,7 @@ def evaluate_submission(
             "episodes": REPLAY_EPISODES,
             "out": str(replays),
         },
+        "rerun": rerun,
     }
     spec_file = scratch / "spec.json"
     spec_file.parent.mkdir(parents=True, exist_ok=True)
@@ -287,16 +299,17 @@ def evaluate_submission(
         wall_s=limits.wall_s,
         env=env,
     )
-    try:
-        result = read_result(out)
-    except ValueError as e:
-        raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
-    expected = current_identity(sub, root)["sha256"]
-    if result["agent"]["sha256"] != expected:
-        raise SandboxError(
-            f"{what}: the result names agent {result['agent']['sha256'][:12]}, the submission's "
-            f"files hash to {expected[:12]} (files changed during the run?)"
-        )
+    if rerun is None:
+        try:
+            result = read_result(out)
+        except ValueError as e:
+            raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
+        expected = current_identity(sub, root)["sha256"]
+        if result["agent"]["sha256"] != expected:
+            raise SandboxError(
+                f"{what}: the result names agent {result['agent']['sha256'][:12]}, the "
+                f"submission's files hash to {expected[:12]} (files changed during the run?)"
+            )
     for m in mm:
         load_multimodal(Path(m["out"]))  # refuses garbage
         shutil.copyfile(m["out"], multimodal_path(out_dir, sub.name, m["scenario"]))
@@ -326,7 +339,8 @@ def untracked_agent_files(sub: Submission, root: Path) -> list[str]:
     its ``--check`` would see other agent files); empty outside a git work tree."""
     import subprocess
 
-    files = [p.resolve() for p in agent_files(root / sub.agent)]
+    ck = root / sub.checkpoint if sub.checkpoint else None
+    files = [p.resolve() for p in agent_files(root / sub.agent, ck)]
     if sub.checkpoint:
         files.append((root / sub.checkpoint).resolve())
     try:
@@ -353,6 +367,7 @@ def _evaluate_all(
     scratch: Path,
     n: int,
     side_by_side: bool = False,
+    reruns: dict[str, dict[str, Any]] | None = None,
 ) -> None:
     """Evaluate ``subs`` one after the other, each with ``opts.workers`` processes; or, with
     ``side_by_side`` (``--check``), ``opts.workers`` submissions at a time with one process
@@ -375,17 +390,25 @@ def _evaluate_all(
         if side_by_side
         else f"{opts.workers} worker(s)"
     )
+    what = "re-running" if reruns is not None else "evaluating"
+    per = "sampled batches" if reruns is not None else f"{n} episodes per scenario"
     log(
-        f"evaluating {len(subs)} submission(s), {n} episodes per scenario, {how}; limits: "
+        f"{what} {len(subs)} submission(s), {per}, {how}; limits: "
         f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per agent process, "
         f"{opts.limits.wall_s:g} s wall per submission; agents {iso}"
     )
     t0 = time.perf_counter()
 
     def one(sub: Submission) -> None:
-        wall = evaluate_submission(sub, root, out_dir, scratch / sub.name, n, per_sub, opts.limits)
-        eps = n * len(sub.scenarios)
-        log(f"  {sub.name}: {eps} episodes in {wall:.1f} s ({eps / max(wall, 1e-9):.0f} ep/s)")
+        rr = None if reruns is None else reruns[sub.name]
+        wall = evaluate_submission(
+            sub, root, out_dir, scratch / sub.name, n, per_sub, opts.limits, rerun=rr
+        )
+        if rr is None:
+            eps = n * len(sub.scenarios)
+            log(f"  {sub.name}: {eps} episodes in {wall:.1f} s ({eps / max(wall, 1e-9):.0f} ep/s)")
+        else:
+            log(f"  {sub.name}: agent re-run in {wall:.1f} s")
 
     if parallel == 1:
         for sub in subs:
@@ -464,73 +487,6 @@ def _diff_text(name: str, old: str, new: str, limit: int = 40) -> str:
     if len(lines) > limit:
         lines = lines[:limit] + [f"... ({len(lines) - limit} more diff lines)"]
     return "\n".join(lines)
-
-
-def _identity_view(result: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in result.items() if k not in ("timing", "versions", "run_key")}
-
-
-def _episode_lines(path: Path, n: int) -> dict[tuple[str, int], str]:
-    out = {}
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            if not line.strip():
-                continue
-            rec = json.loads(line)
-            if rec["episode"] < n:
-                out[(rec["scenario"], rec["episode"])] = line.rstrip("\n")
-    return out
-
-
-def compare_results(
-    sub: Submission, committed: Path, fresh: Path, n: int, notes: list[str]
-) -> list[str]:
-    """Differences between a submission's committed result and a fresh one (empty: equal)."""
-    old, new = read_result(committed), read_result(fresh)
-    name = f"results/{committed.name}"
-    diffs = []
-    if old["agent"]["sha256"] != new["agent"]["sha256"]:
-        fa, fb = old["agent"]["files"], new["agent"]["files"]
-        parts = [
-            f"{label}: {', '.join(names)}"
-            for label, names in (
-                ("missing here", sorted(set(fa) - set(fb))),
-                ("new", sorted(set(fb) - set(fa))),
-                ("changed", sorted(k for k in set(fa) & set(fb) if fa[k] != fb[k])),
-            )
-            if names
-        ]
-        what = "; ".join(parts) or "the checkpoint"
-        diffs.append(
-            f"{name}: the agent's files changed since it was evaluated ({what}); "
-            f"re-run `cdr-bench leaderboard build --evaluate {sub.name}`"
-        )
-    if old["versions"] != new["versions"]:
-        notes.append(f"{name}: evaluated with {old['versions']}, now {new['versions']}")
-    full = all(s["episodes"] == n for s in old["scenarios"])
-    if full:
-        a, b = _identity_view(old), _identity_view(new)
-        if a != b:
-            diffs.append(
-                _diff_text(
-                    name,
-                    json.dumps(a, indent=1, sort_keys=True),
-                    json.dumps(b, indent=1, sort_keys=True),
-                )
-            )
-    ea = _episode_lines(committed.with_suffix(".jsonl"), n)
-    eb = _episode_lines(fresh.with_suffix(".jsonl"), n)
-    bad = [
-        k for k in sorted(set(ea) | set(eb), key=lambda k: (k[0], k[1])) if ea.get(k) != eb.get(k)
-    ]
-    if bad:
-        lines = [f"{name.replace('.json', '.jsonl')}: {len(bad)} of {len(eb)} episodes differ"]
-        for k in bad[:3]:
-            lines.append(f"  {k[0]} episode {k[1]}:")
-            lines.append(f"    committed: {_short(ea.get(k))}")
-            lines.append(f"    now:       {_short(eb.get(k))}")
-        diffs.append("\n".join(lines))
-    return diffs
 
 
 def _short(line: str | None, width: int = 300) -> str:
@@ -638,18 +594,81 @@ def with_seeds(subs: list[Submission]) -> list[Submission]:
     return [v for s in subs for v in (s, *s.seed_views())]
 
 
-def sampled_seeds(subs: list[Submission]) -> list[Submission]:
-    """Each submission and one of its other seeds: the sample ``--check`` re-evaluates. The seed
-    is picked by a hash of the entry's name and seeds' checkpoints, so a clean clone picks the
-    same one; ``--all-seeds`` checks them all."""
+def sampled_seeds(subs: list[Submission], rng: random.Random) -> list[Submission]:
+    """Each submission and one of its other seeds drawn with ``rng``: the runs whose agent
+    ``--check`` asks again (``--all-seeds``: every seed)."""
     out = []
     for s in subs:
         out.append(s)
         views = s.seed_views()
         if views:
-            key = "|".join([s.name, *(x.checkpoint for x in s.seeds)]).encode()
-            out.append(views[int(hashlib.sha256(key).hexdigest(), 16) % len(views)])
+            out.append(views[rng.randrange(len(views))])
     return out
+
+
+def replay_all(
+    views: list[Submission], results_dir: Path, first: int | None, workers: int
+) -> tuple[int, list[str]]:
+    """Replay every committed episode of these runs (:func:`.verify.replay_result`, the first
+    ``first`` of each scenario when given), ``workers`` result files at a time. Returns the
+    number of episodes replayed and the differences (readable; empty: all identical)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from cdr_bench.leaderboard.verify import replay_result
+
+    paths = [result_path(results_dir, v.name) for v in views]
+    missing = [
+        f"results/{p.name}: missing from the committed leaderboard" for p in paths if not p.exists()
+    ]
+    paths = [p for p in paths if p.exists()]
+    total, diffs = 0, list(missing)
+    if workers <= 1 or len(paths) <= 1:
+        outcomes = [replay_result(p, first) for p in paths]
+    else:
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(workers, len(paths)), mp_context=ctx) as ex:
+            outcomes = list(ex.map(replay_result, paths, [first] * len(paths)))
+    for p, (n, d) in zip(paths, outcomes, strict=True):
+        total += n
+        if d:
+            diffs.append(
+                f"results/{p.name}: the per-episode log is not what its recorded decisions give "
+                "(edited, or the simulator changed since the evaluation):\n  " + "\n  ".join(d)
+            )
+    return total, diffs
+
+
+def identity_diffs(views: list[Submission], root: Path, results_dir: Path) -> list[str]:
+    """Runs whose agent files (code, named checkpoint, declared files) changed since their
+    committed result was scored."""
+    diffs = []
+    for v in views:
+        p = result_path(results_dir, v.name)
+        try:
+            old = read_result(p)["agent"]
+        except ValueError:
+            continue  # reported by the replay
+        new = current_identity(v, root)
+        if old.get("sha256") == new["sha256"]:
+            continue
+        fa, fb = old.get("files", {}), new["files"]
+        parts = [
+            f"{label}: {', '.join(names)}"
+            for label, names in (
+                ("missing here", sorted(set(fa) - set(fb))),
+                ("new", sorted(set(fb) - set(fa))),
+                ("changed", sorted(k for k in set(fa) & set(fb) if fa[k] != fb[k])),
+            )
+            if names
+        ]
+        what = "; ".join(parts) or "the checkpoint"
+        diffs.append(
+            f"results/{p.name}: the agent's files changed since it was evaluated ({what}); "
+            f"re-run `cdr-bench leaderboard build --evaluate {v.name}`"
+        )
+    return diffs
 
 
 def _check(
@@ -672,17 +691,59 @@ def _check(
         )
     diffs: list[str] = []
     notes: list[str] = []
-    chosen = with_seeds(chosen) if opts.all_seeds else sampled_seeds(chosen)
+    views = with_seeds(chosen)
+    diffs += identity_diffs(views, root, results_dir)
+    replayed, replay_diffs = replay_all(
+        views, results_dir, None if n == committed_n else n, opts.workers
+    )
+    diffs += replay_diffs
+    log(
+        f"replayed {replayed} committed episodes of {len(views)} run(s) "
+        f"({time.perf_counter() - t0:.1f} s): "
+        + ("identical" if not replay_diffs else f"{len(replay_diffs)} file(s) differ")
+    )
+    sample_seed = opts.sample_seed if opts.sample_seed is not None else secrets.randbits(32)
+    rng = random.Random(sample_seed)
+    reruns: dict[str, dict[str, Any]] = {}
+    chosen = views if opts.all_seeds else sampled_seeds(chosen, rng)
     with staging(lb_dir) as stage:
         fresh = stage / "results"
         fresh.mkdir()
-        _evaluate_all(chosen, opts, root, fresh, stage / "scratch", n, side_by_side=True)
+        scratch = stage / "scratch"
         for sub in chosen:
             committed = result_path(results_dir, sub.name)
-            if not committed.exists():
-                diffs.append(f"results/{committed.name}: missing from the committed leaderboard")
+            try:
+                result = read_result(committed)
+            except ValueError:
                 continue
-            diffs += compare_results(sub, committed, result_path(fresh, sub.name), n, notes)
+            grid = list(batches_of(result))
+            if n != committed_n:
+                grid = [(sc, k) for sc, k in grid if k * DEFAULT_BATCH_SIZE < n]
+            picked = sorted(rng.sample(grid, min(opts.rerun_batches, len(grid))))
+            reruns[sub.name] = {
+                "result": str(committed.resolve()),
+                "batches": picked,
+                "out": str((scratch / sub.name / "agreement.json").resolve()),
+            }
+        chosen = [s for s in chosen if s.name in reruns]
+        log(
+            f"agent re-run sample drawn with --sample-seed {sample_seed}: "
+            f"{opts.rerun_batches} batch(es) of {DEFAULT_BATCH_SIZE} episodes per run, "
+            f"tolerance {100 * MIN_AGREEMENT:g} % identical decisions"
+        )
+        _evaluate_all(chosen, opts, root, fresh, scratch, n, side_by_side=True, reruns=reruns)
+        for sub in chosen:
+            got = json.loads(Path(reruns[sub.name]["out"]).read_text(encoding="utf-8"))
+            text, ok = agreement_verdict(sub.name, got["batches"])
+            log(text)
+            bad = [d for b in got["batches"] for d in b["differences"]]
+            if bad:
+                diffs.append(
+                    f"results/{sub.name}.json: re-run batches not reproduced:\n  "
+                    + "\n  ".join(bad)
+                )
+            if not ok:
+                diffs.append(f"results/{sub.name}.json: {text}")
             for sc in sub.multimodality:
                 a_p, b_p = (
                     multimodal_path(results_dir, sub.name, sc),
@@ -729,7 +790,8 @@ def _check(
         print("\n\n".join(diffs), file=sys.stderr)
         return 1
     log(
-        f"check passed{scope}: {len(chosen)} submission(s) re-evaluated, pages identical "
+        f"check passed{scope}: {replayed} episodes replayed, {len(chosen)} agent(s) re-run, "
+        "pages identical "
         f"({time.perf_counter() - t0:.1f} s)"
     )
     return 0

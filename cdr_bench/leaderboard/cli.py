@@ -20,8 +20,9 @@ def register(sub: Any) -> None:
         "the submissions and the result files in leaderboard/results, then the results tables "
         "in the marked blocks of the repository's docs (as render-docs). With --evaluate, first "
         "score every submission (or the named ones) in its own sandboxed process. With --check, "
-        "re-evaluate and fail (exit code 1, with a diff) if the committed leaderboard or a "
-        "docs block differs.",
+        "replay every committed episode from its recorded decisions, ask each entry's agent again "
+        "on a random sample of them, and fail (exit code 1, with a diff) if a record, the "
+        "agreement, the committed leaderboard or a docs block differs.",
     )
     b.add_argument(
         "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
@@ -36,7 +37,8 @@ def register(sub: Any) -> None:
     b.add_argument(
         "--check",
         action="store_true",
-        help="re-evaluate and compare with the committed leaderboard; writes nothing",
+        help="replay every committed episode, re-run each agent on a random sample, re-render "
+        "and compare with the committed leaderboard; writes nothing",
     )
     b.add_argument(
         "--episodes",
@@ -49,8 +51,22 @@ def register(sub: Any) -> None:
     b.add_argument(
         "--all-seeds",
         action="store_true",
-        help="--check: re-evaluate every training seed of every entry (default: the shown seed "
-        "and one other per entry, picked by a hash of the entry)",
+        help="--check: ask the agent of every training seed of every entry again (default: the "
+        "shown seed and one other per entry, drawn at random; every seed is always replayed)",
+    )
+    b.add_argument(
+        "--sample-seed",
+        type=int,
+        default=None,
+        help="--check: seed of the agent re-run sample (default: drawn at random and printed, "
+        "so a check can be repeated exactly)",
+    )
+    b.add_argument(
+        "--rerun-batches",
+        type=int,
+        default=1,
+        help="--check: batches of 200 committed episodes per run on which the agent is asked "
+        "again (1)",
     )
     b.add_argument("--workers", type=int, default=2, help="evaluation processes (2)")
     b.add_argument("--cpu-limit", type=int, default=defaults.cpu_s, help="CPU seconds per process")
@@ -101,6 +117,10 @@ def _build(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
+    if not 1 <= args.rerun_batches <= 30:
+        raise UserError(f"--rerun-batches: expected 1..30, got {args.rerun_batches}")
+    if args.sample_seed is not None and not 0 <= args.sample_seed < 2**63:
+        raise UserError(f"--sample-seed: expected 0..2**63-1, got {args.sample_seed}")
     if args.cpu_limit < 1 or args.memory_limit < 64 or args.timeout <= 0:
         raise UserError("--cpu-limit, --memory-limit (>= 64 MiB) and --timeout must be positive")
     d = Path(args.dir)
@@ -115,6 +135,8 @@ def _build(args: argparse.Namespace) -> int:
         limits=Limits(cpu_s=args.cpu_limit, memory_mb=args.memory_limit, wall_s=args.timeout),
         reference=args.reference or DEFAULT_REFERENCE,
         all_seeds=args.all_seeds,
+        sample_seed=args.sample_seed,
+        rerun_batches=args.rerun_batches,
     )
     rc = run(opts)
     if rc == 0 or args.check:

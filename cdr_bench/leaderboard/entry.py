@@ -7,6 +7,10 @@ confined process (:mod:`cdr_bench.evaluate.sandbox`) that sees the repository re
 leaderboard folder (results, staging) hidden, and only exchanges observations and actions with
 this one. ``SPEC.json`` is written by the build and holds plain values only.
 
+With ``rerun`` in the spec it scores nothing: it asks the agent again along committed episodes
+(:func:`cdr_bench.leaderboard.verify.check_batch`) and writes how many of its decisions equal the
+recorded ones (``leaderboard build --check``).
+
 Besides the result files it maps first-action distributions (``multimodality``) and records the
 trajectories of the first episodes of the scenarios a submission replays
 (:func:`cdr_bench.evaluate.api.record_traces`: the same episodes, seeds and agent reset as the
@@ -26,10 +30,7 @@ REPLAY_KIND = "cdr-bench replays"
 
 
 def run(spec: dict[str, Any]) -> None:
-    from cdr_bench.evaluate.analysis import multimodal
-    from cdr_bench.evaluate.api import evaluate, record_traces, resolve_jobs
     from cdr_bench.evaluate.remote import AgentOptions
-    from cdr_bench.evaluate.results import atomic_write_text
     from cdr_bench.evaluate.sandbox import Confinement, Limits
 
     limits = Limits(**spec["limits"])
@@ -37,6 +38,50 @@ def run(spec: dict[str, Any]) -> None:
         confinement=Confinement(view=spec["root"], hidden=tuple(spec["hidden"]), limits=limits),
         limits=limits,
     )
+    if spec.get("rerun") is not None:
+        _rerun(spec, options)
+    else:
+        _evaluate(spec, options)
+    _analyses(spec, options)
+
+
+def _rerun(spec: dict[str, Any], options: Any) -> None:
+    """Ask the agent again along committed episodes (the batches ``spec["rerun"]["batches"]``
+    of the result ``spec["rerun"]["result"]``), flying the recorded decisions; write the
+    agreement and any record that the replay did not reproduce to ``spec["rerun"]["out"]``."""
+    from cdr_bench.evaluate.results import atomic_write_text, read_episodes, read_result
+    from cdr_bench.evaluate.runner import close_all, load_for
+    from cdr_bench.leaderboard.verify import check_batch
+    from cdr_bench.scenarios import load_scenario
+
+    rr = spec["rerun"]
+    try:
+        result = read_result(rr["result"])
+        episodes = read_episodes(rr["result"], result)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    agent_file = str(Path(spec["agent"]).resolve())
+    batches = []
+    try:
+        for scenario, k in rr["batches"]:
+            agent = load_for(agent_file, load_scenario(scenario), options)
+            chk = check_batch(result, episodes, scenario, k, agent=agent)
+            batches.append(
+                {
+                    "scenario": scenario,
+                    "batch": k,
+                    **(chk.agreement or {"decisions": 0, "agree": 0, "disagreements": []}),
+                    "differences": chk.differences,
+                }
+            )
+    finally:
+        close_all()
+    atomic_write_text(Path(rr["out"]), json.dumps({"batches": batches}) + "\n")
+
+
+def _evaluate(spec: dict[str, Any], options: Any) -> None:
+    from cdr_bench.evaluate.api import evaluate, resolve_jobs
+
     jobs, _ = resolve_jobs(spec["scenarios"], spec["suite"], spec["episodes"])
     evaluate(
         spec["agent"],
@@ -49,6 +94,14 @@ def run(spec: dict[str, Any]) -> None:
         agent_options=options,
         progress=False,
     )
+
+
+def _analyses(spec: dict[str, Any], options: Any) -> None:
+    """The first-action maps and the recorded trajectories a submission asks for."""
+    from cdr_bench.evaluate.analysis import multimodal
+    from cdr_bench.evaluate.api import record_traces
+    from cdr_bench.evaluate.results import atomic_write_text
+
     for mm in spec["multimodality"]:
         multimodal(
             spec["agent"],

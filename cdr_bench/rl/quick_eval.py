@@ -12,8 +12,9 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.evaluate.metrics import get_metric
+from cdr_bench.evaluate.rollout import fly
 from cdr_bench.sim.core import OUTCOME_NAMES
-from cdr_bench.vector_env import VectorEnv
+from cdr_bench.vector_env import VectorEnv, VectorStep
 
 ActBatch = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -40,18 +41,8 @@ def quick_eval(
     for start in range(0, episodes, batch):
         env = VectorEnv(scenario, min(batch, episodes - start))
         obs, masks = env.reset(seeds=np.arange(seed + start, seed + start + env.num_envs))
-        los = np.zeros(env.num_envs, bool)
-        flown = np.zeros(env.num_envs, np.int64)  # the ownship's steps (decisions)
-        while (flying := env.flying).any():
-            actions = np.full((env.num_envs, env.n_agents), 13)
-            own = flying[:, 0]
-            if own.any():
-                actions[own, 0] = act_batch(obs[own, 0], masks[own, 0])
-            st = env.step(actions)
-            obs, masks = st.obs, st.action_mask
-            los |= st.result.los_with[:, 0].any(-1)
-            flown += st.result.acting[:, 0]
-        out.append(env.sim.ac_outcome[:, 0].copy())
+        los, flown = _fly_ownship(act_batch, env, obs, masks)
+        out.append(env.outcomes[:, 0].copy())
         had_los.append(los)
         steps.append(flown)
     oc, hl, st_ = np.concatenate(out), np.concatenate(had_los), np.concatenate(steps)
@@ -64,3 +55,28 @@ def quick_eval(
         "episodes": len(records),
         **{k: get_metric(m).point(records) for k, m in QUICK_METRICS.items()},
     }
+
+
+def _fly_ownship(
+    act_batch: ActBatch, env: VectorEnv, obs: np.ndarray, masks: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fly the episodes just started in ``env`` to their end, the ownship by ``act_batch``, the
+    other controlled aircraft holding: whether each ownship was ever in LoS, and its steps
+    (decisions)."""
+    los = np.zeros(env.num_envs, bool)
+    flown = np.zeros(env.num_envs, np.int64)
+
+    def on_step(_: np.ndarray, st: VectorStep) -> None:
+        los[:] |= st.result.los_with[:, 0].any(-1)
+        flown[:] += st.result.acting[:, 0]
+
+    fly(
+        env,
+        obs,
+        masks,
+        lambda d: act_batch(d.obs, d.masks),
+        drive="ownship",
+        until="all",
+        on_step=on_step,
+    )
+    return los, flown

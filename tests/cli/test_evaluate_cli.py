@@ -5,6 +5,7 @@ output counts too); only the runs that are killed are processes of their own."""
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 import signal
@@ -18,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from cdr_bench.cli import main
+from cdr_bench.evaluate.results import read_result
 
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS = ROOT / "agents"
@@ -85,7 +87,7 @@ def without_timing(path):
 
 
 def no_results_left(tmp_path):
-    return not [p for p in tmp_path.rglob("*") if p.suffix in (".json", ".jsonl")]
+    return not [p for p in tmp_path.rglob("*") if p.suffix in (".json", ".jsonl", ".gz")]
 
 
 BASE = """
@@ -165,14 +167,17 @@ def test_evaluate_writes_summary_and_result_files(cdr, tmp_path):
     assert r.returncode == 0, r.stderr
     assert "ownship" in r.stdout and "intruders" in r.stdout and "success" in r.stdout
     res = json.loads(out.read_text())
-    assert res["schema_version"] == 3 and res["agent"]["name"] == "direct"
+    assert res["schema_version"] == 4 and res["agent"]["name"] == "direct"
     assert "agent.py" in res["agent"]["files"]
-    sc = res["scenarios"][0]
+    assert "metrics" not in res["scenarios"][0]  # facts in files, metrics at read time
+    sc = read_result(out)["scenarios"][0]
     assert sc["id"] == "marl/low-2" and sc["config"]["id"] == "marl/low-2"
     assert set(sc["metrics"]) == {"ownship", "intruders"}
     assert sc["metrics"]["intruders"]["episodes"] == 16
-    lines = out.with_suffix(".jsonl").read_text().splitlines()
+    lines = gzip.open(out.with_suffix(".jsonl.gz"), "rt").read().splitlines()
     assert len(lines) == 8 and json.loads(lines[0])["scenario"] == "marl/low-2"
+    first = json.loads(lines[0])["aircraft"]
+    assert all(len(a["actions"]) == a["steps"] for a in first)  # one decision per step flown
     assert not out.with_suffix(".partial.jsonl").exists()
 
 
@@ -195,8 +200,8 @@ def test_workers_and_resume_give_identical_results(cdr, tmp_path):
     par = tmp_path / "par.json"
     r = evaluate(cdr, agent, par, "--workers", 2, episodes=16)
     assert r.returncode == 0, r.stderr
-    assert without_timing(par) == {**without_timing(ref), "episodes_file": "par.jsonl"}
-    assert par.with_suffix(".jsonl").read_bytes() == ref.with_suffix(".jsonl").read_bytes()
+    assert without_timing(par) == {**without_timing(ref), "episodes_file": "par.jsonl.gz"}
+    assert par.with_suffix(".jsonl.gz").read_bytes() == ref.with_suffix(".jsonl.gz").read_bytes()
 
     out = tmp_path / "res.json"
     partial = out.with_suffix(".partial.jsonl")
@@ -207,8 +212,8 @@ def test_workers_and_resume_give_identical_results(cdr, tmp_path):
     assert r.returncode == 0, r.stderr
     res = json.loads(out.read_text())
     assert res["timing"]["resumed"] is True
-    assert without_timing(out) == {**without_timing(ref), "episodes_file": "res.jsonl"}
-    assert out.with_suffix(".jsonl").read_bytes() == ref.with_suffix(".jsonl").read_bytes()
+    assert without_timing(out) == {**without_timing(ref), "episodes_file": "res.jsonl.gz"}
+    assert out.with_suffix(".jsonl.gz").read_bytes() == ref.with_suffix(".jsonl.gz").read_bytes()
     assert not partial.exists()
 
 
@@ -429,8 +434,11 @@ def test_report_refuses_a_result_whose_episode_log_differs(cdr, tmp_path):
     assert evaluate(cdr, AGENTS / "direct", out, episodes=4).returncode == 0
     assert cdr("report", out).returncode == 0
     # a disk that filled up between the two renames: a new JSONL beside the old JSON
-    ep = out.with_suffix(".jsonl")
-    ep.write_text(ep.read_text().replace('"outcome":"los"', '"outcome":"success"') + "\n")
+    ep = out.with_suffix(".jsonl.gz")
+    text = gzip.open(ep, "rt").read()
+    ep.write_bytes(
+        gzip.compress((text.replace('"outcome":"los"', '"outcome":"success"') + "\n").encode())
+    )
     for cmd in (("report", out), ("compare", out, out)):
         r = cdr(*cmd)
         assert r.returncode == 2, r.stderr
@@ -445,7 +453,7 @@ def test_masked_action_is_counted_not_fatal(cdr, tmp_path):
     out = tmp_path / "r.json"
     r = evaluate(cdr, climber, out, episodes=4)  # 14 = climb: masked at level 2
     assert r.returncode == 0, r.stderr
-    m = json.loads(out.read_text())["scenarios"][0]["metrics"]["ownship"]
+    m = read_result(out)["scenarios"][0]["metrics"]["ownship"]
     assert m["invalid_action_rate"]["count"] > 0
 
 

@@ -3,6 +3,7 @@ leaderboards, and the all-or-nothing behaviour with misbehaving submissions."""
 
 from __future__ import annotations
 
+import gzip
 import json
 import re
 import textwrap
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from cdr_bench.evaluate.results import gzip_bytes, read_result, sha256_text
 from tests.leaderboard.conftest import EPISODES, SCENARIOS, cdr, snapshot, submission_yaml
 
 
@@ -80,7 +82,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert [t["episode"] for t in fixed] == [0, 1, 2]
     first = next(
         json.loads(x)
-        for x in (lb / "results" / "weave.jsonl").read_text().splitlines()
+        for x in gzip.open(lb / "results" / "weave.jsonl.gz", "rt").read().splitlines()
         if '"scenario":"tactical/head-on-fixed"' in x
     )
     assert fixed[0]["seed"] == first["seed"]
@@ -141,16 +143,16 @@ def test_check_reproduces_everything_but_a_tampered_line(repo: Path) -> None:
 
 
 def test_check_fails_on_tampered_result_file(repo: Path) -> None:
+    """A per-episode log edited without its hash: every reader refuses the pair. (Edits with
+    the hash recomputed are caught by the replay: tests/leaderboard/test_verify.py.)"""
     lb = repo / "leaderboard"
-    path = lb / "results" / "direct.json"
-    res = json.loads(path.read_text())
-    m = res["scenarios"][0]["metrics"]["ownship"]["success_rate"]
-    m["value"] = 1.0 if m["value"] != 1.0 else 0.0
-    path.write_text(json.dumps(res, indent=1) + "\n")
+    log = lb / "results" / "direct.jsonl.gz"
+    text = gzip.open(log, "rt").read().replace('"outcome":"', '"outcome":"x', 1)
+    log.write_bytes(gzip.compress(text.encode()))
     r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
     assert r.returncode == 1
     assert "results/direct.json" in r.stderr
-    assert "do not match the per-episode file" in r.stderr
+    assert "does not match it (episodes_sha256 differs" in r.stderr
     # plain build refuses it too, and writes nothing
     before = snapshot(lb)
     r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
@@ -253,8 +255,8 @@ def test_adding_a_submission_is_one_yaml_file(repo: Path) -> None:
         cwd=repo,
     )
     assert r.returncode == 0, r.stderr
-    assert (lb / "results" / "direct-again.jsonl").read_bytes() == (
-        lb / "results" / "direct.jsonl"
+    assert (lb / "results" / "direct-again.jsonl.gz").read_bytes() == (
+        lb / "results" / "direct.jsonl.gz"
     ).read_bytes()  # same agent, same episodes (the count is taken from the committed results)
     assert "Direct again" in (lb / "README.md").read_text()
 
@@ -315,7 +317,7 @@ def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> No
     res = lb / "results"
     assert (res / "weave.json").exists() and (res / "weave.seed-2.json").exists()
     assert not (res / "weave.seed-2.replays.json").exists()  # per-episode extras: shown seed only
-    one, two = (json.loads((res / f).read_text()) for f in ("weave.json", "weave.seed-2.json"))
+    one, two = (read_result(res / f) for f in ("weave.json", "weave.seed-2.json"))
     assert [s["seeds_sha256"] for s in one["scenarios"]] == [
         s["seeds_sha256"] for s in two["scenarios"]
     ]
@@ -334,13 +336,18 @@ def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> No
     assert 'id="table-seeds"' in (lb / "index.html").read_text()
     # a seed's result tampered with: the check fails naming the file; a missing one is an error
     p = res / "weave.seed-2.json"
-    r2 = json.loads(p.read_text())
-    m = r2["scenarios"][0]["metrics"]["ownship"]["success_rate"]
-    m["value"] = 1.0 if m["value"] != 1.0 else 0.0
-    p.write_text(json.dumps(r2, indent=1) + "\n")
+    text = gzip.open(p.with_suffix(".jsonl.gz"), "rt").read()
+    forged = text.replace('"outcome":"boundary"', '"outcome":"success"', 1)
+    forged = forged.replace('"outcome":"timeout"', '"outcome":"success"', 1)
+    forged = forged.replace('"los":true', '"los":false', 1) if forged == text else forged
+    assert forged != text
+    p.with_suffix(".jsonl.gz").write_bytes(gzip_bytes(forged))
+    doc = json.loads(p.read_text())
+    doc["episodes_sha256"] = sha256_text(forged)
+    p.write_text(json.dumps(doc, indent=1) + "\n")
     r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
     assert r.returncode == 1 and "weave.seed-2.json" in r.stderr, r.stderr
     p.unlink()
-    (res / "weave.seed-2.jsonl").unlink()
+    (res / "weave.seed-2.jsonl.gz").unlink()
     r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
     assert r.returncode == 2 and "no result file for seed 2 of weave" in r.stderr

@@ -116,7 +116,7 @@ def _write(tmp: Path, name: str) -> Entry:
         "base_seed": 0,
         "batch_size": 200,
         "versions": {"cdr-bench": "test"},
-        "episodes_file": f"{name}.jsonl",
+        "episodes_file": rf.episodes_path(Path(f"{name}.json")).name,
         "scenarios": scenarios,
         "timing": {"decision_latency": {s["id"]: lat for s in scenarios}},
     }

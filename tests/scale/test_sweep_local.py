@@ -44,7 +44,7 @@ def test_sweep_runs_and_resumes(local_ray, tmp_path):
         result = json.loads((out / t.key / RESULT_FILE).read_text())
         assert result["kind"] == "cdr-bench evaluation"
         assert result["agent"]["path"] == str(out.resolve() / t.key / "agent.py")
-        assert (out / t.key / "result.jsonl").is_file()
+        assert (out / t.key / "result.jsonl.gz").is_file()
         assert not (out / t.key / "state.pt").exists()
     assert not (out / ".work").exists()
     assert sorted(p.name for p in out.iterdir()) == sorted(
@@ -97,20 +97,19 @@ def test_evaluate_ray_backend_equals_local(local_ray, tmp_path):
     )
     assert b["timing"]["backend"] == "ray" and a["timing"]["backend"] == "local"
     assert _strip(tmp_path / "local.json") == _strip(tmp_path / "ray.json")
-    assert (tmp_path / "local.jsonl").read_bytes() == (tmp_path / "ray.jsonl").read_bytes()
+    assert (tmp_path / "local.jsonl.gz").read_bytes() == (tmp_path / "ray.jsonl.gz").read_bytes()
     with pytest.raises(UserError, match="--address needs --backend ray"):
         evaluate(agent, jobs, tmp_path / "x.json", address="127.0.0.1:1", progress=False)
 
 
 @pytest.mark.slow
-def test_a_dead_attempt_is_resumed_not_restarted(tmp_path):
+def test_a_dead_attempt_is_resumed_not_restarted(tmp_path, capsys):
     """A sweep killed mid-training (e.g. at the end of a session) leaves its work folder with
     the trainer's saved state; the next attempt takes it over with ``cdr-bench train --resume``
     (log lines written after that state dropped), and never takes a live attempt's folder."""
     import fcntl
-    import subprocess
-    import sys
 
+    from cdr_bench.cli import main
     from cdr_bench.scale.sweep import run_trial
 
     (trial,) = load_sweep(tiny_sweep(tmp_path, [1])).trials
@@ -118,8 +117,7 @@ def test_a_dead_attempt_is_resumed_not_restarted(tmp_path):
     dead = out / ".work" / f"{trial.key}-dead0001"
     argv = trial.train_argv(str(dead))
     argv[argv.index("--total-steps") + 1] = "60"  # the attempt "died" at its state of step 60
-    r = subprocess.run([sys.executable, "-m", "cdr_bench", "train", *argv], capture_output=True)
-    assert r.returncode == 0, r.stderr[-2000:]
+    assert main(["train", *argv]) == 0, capsys.readouterr().err[-2000:]
     assert (dead / "state.pt").is_file()
     with open(dead / "log.jsonl", "a") as f:
         f.write('{"step": 999999, "lost": true}\n{"step": 1000')  # written after the state

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 import shutil
@@ -23,14 +24,19 @@ from cdr_bench.scale.sweep import RESULT_FILE, TRIAL_FILE  # noqa: E402
 from .helpers import REPO, tiny_sweep  # noqa: E402
 
 RAY = str(Path(sys.executable).with_name("ray"))
-# detect a dead node within a few seconds instead of the default half minute
+# detect a dead node within a few seconds instead of the default half minute: a killed node
+# refuses the check at once, 3 checks a second apart; a live node on a loaded machine has 10 s
+# to answer each (a 1 s answer limit could declare the head dead)
 FAST_HEALTH = {
     "RAY_health_check_initial_delay_ms": "1000",
     "RAY_health_check_period_ms": "1000",
-    "RAY_health_check_timeout_ms": "1000",
+    "RAY_health_check_timeout_ms": "10000",
     "RAY_health_check_failure_threshold": "3",
     "RAY_USAGE_STATS_ENABLED": "0",
 }
+HANG_S = 600
+"""Waits for nodes, trials and the driver give up after this long: a guard against a hung test
+only (starting Ray nodes takes seconds here, a minute or more on a loaded machine)."""
 
 
 def _free_port() -> int:
@@ -58,13 +64,13 @@ def _kill(p: subprocess.Popen) -> None:
     p.wait(timeout=30)
 
 
-def _wait_nodes(address: str, n: int, timeout_s: float = 90) -> None:
+def _wait_nodes(address: str, n: int, timeout_s: float = HANG_S) -> None:
     code = (
         "import ray,sys; ray.init(address=sys.argv[1], logging_level='ERROR'); "
         "print(sum(x['Alive'] for x in ray.nodes()))"
     )
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
         r = subprocess.run([sys.executable, "-c", code, address], capture_output=True, text=True)
         if r.returncode == 0 and r.stdout.strip().splitlines()[-1:] == [str(n)]:
             return
@@ -110,9 +116,9 @@ def cluster(tmp_path):
         shutil.rmtree(temp, ignore_errors=True)
 
 
-def _wait_work_dirs(out: Path, n: int, driver: subprocess.Popen, timeout_s: float = 120) -> None:
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
+def _wait_work_dirs(out: Path, n: int, driver: subprocess.Popen, timeout_s: float = HANG_S) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
         work = out / ".work"
         if work.is_dir() and len([p for p in work.iterdir() if p.is_dir()]) >= n:
             return
@@ -156,7 +162,7 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
     time.sleep(1)
     running = {p.name for p in (out / ".work").iterdir() if p.is_dir()}  # not the trial locks
     _kill(nodes["worker"])
-    stdout, _ = driver.communicate(timeout=240)
+    stdout, _ = driver.communicate(timeout=HANG_S)
     assert driver.returncode == 0, stdout
 
     keys = sorted(t.key for t in sweep.trials)
@@ -166,7 +172,7 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
         assert rec["key"] == k
         res = json.loads((out / k / RESULT_FILE).read_text())
         assert len(res["scenarios"]) == 1 and res["scenarios"][0]["episodes"] == 2
-        assert len((out / k / "result.jsonl").read_text().splitlines()) == 2
+        assert len(gzip.open(out / k / "result.jsonl.gz", "rt").read().splitlines()) == 2
     summary = json.loads((out / "sweep.json").read_text())
     assert summary["failures"] == {} and all(t["done"] for t in summary["trials"])
     # the attempt that died with the worker node did not land; a retry did
@@ -198,4 +204,4 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
             env=env,
         )
         assert r.returncode == 0, r.stderr
-    assert (tmp_path / "local.jsonl").read_bytes() == (tmp_path / "ray.jsonl").read_bytes()
+    assert (tmp_path / "local.jsonl.gz").read_bytes() == (tmp_path / "ray.jsonl.gz").read_bytes()

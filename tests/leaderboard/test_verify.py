@@ -1,0 +1,171 @@
+"""Verification by replay: every committed episode is flown again from its recorded decisions
+(exact), and each agent is asked again on a random sample of them (within a tolerance).
+
+The miniature leaderboard of ``conftest.py`` (8 episodes per scenario) is forged in the ways a
+hostile contributor would: an outcome edited and the hash recomputed, a decision edited, and a
+whole batch of records replaced by another agent's (consistent with its own decisions, so the
+replay passes and only the agent re-run can catch it)."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from cdr_bench.evaluate.results import gzip_bytes, sha256_text
+from cdr_bench.leaderboard.verify import MIN_AGREEMENT, agreement_verdict, replay_result
+from tests.leaderboard.conftest import EPISODES, cdr, submission_yaml
+
+CHECK = ("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1)
+
+
+def _lines(path: Path) -> list[dict]:
+    return [json.loads(x) for x in gzip.open(path, "rt").read().splitlines() if x]
+
+
+def _rewrite(result: Path, records: list[dict]) -> None:
+    """Write ``records`` as the result's per-episode log, with its hash updated in the JSON
+    (what a forger does to pass the file's own consistency check)."""
+    text = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in records)
+    result.with_suffix(".jsonl.gz").write_bytes(gzip_bytes(text))
+    doc = json.loads(result.read_text())
+    doc["episodes_sha256"] = sha256_text(text)
+    result.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def test_replay_reproduces_every_committed_episode(repo: Path) -> None:
+    for name in ("direct", "weave", "weave.seed-2"):
+        n, diffs = replay_result(repo / "leaderboard" / "results" / f"{name}.json")
+        assert (n, diffs) == (4 * EPISODES, [])
+
+
+def test_replay_catches_an_edited_outcome(repo: Path) -> None:
+    res = repo / "leaderboard" / "results" / "direct.json"
+    recs = _lines(res.with_suffix(".jsonl.gz"))
+    last = max(i for i, r in enumerate(recs) if r["scenario"] == "high")  # the last episode
+    recs[last]["aircraft"][0]["min_sep_km"] = 99.0
+    recs[last]["aircraft"][0]["los"] = False
+    _rewrite(res, recs)
+    n, diffs = replay_result(res)
+    assert n == 4 * EPISODES and len(diffs) == 1
+    assert diffs[0].startswith(f"high episode {EPISODES - 1}: ")
+    assert "ownship_0.min_sep_km committed 99.0, replayed " in diffs[0]
+
+
+def test_replay_catches_an_edited_decision(repo: Path) -> None:
+    res = repo / "leaderboard" / "results" / "direct.json"
+    recs = _lines(res.with_suffix(".jsonl.gz"))
+    first = min(i for i, r in enumerate(recs) if r["scenario"] == "low")
+    code = recs[first]["aircraft"][0]["actions"]
+    recs[first]["aircraft"][0]["actions"] = ("0" if code[0] != "0" else "1") + code[1:]
+    _rewrite(res, recs)
+    _, diffs = replay_result(res)
+    assert diffs and diffs[0].startswith(("low episode 0", "low batch 0")), diffs
+
+
+def test_check_fails_on_a_forged_log_and_names_it(repo: Path) -> None:
+    res = repo / "leaderboard" / "results" / "weave.seed-2.json"
+    recs = _lines(res.with_suffix(".jsonl.gz"))
+    i = max(i for i, r in enumerate(recs) if r["scenario"] == "low")
+    recs[i]["aircraft"][0]["goal_reward"] += 1.0
+    _rewrite(res, recs)
+    r = cdr(*CHECK, cwd=repo)
+    assert r.returncode == 1, r.stderr
+    assert "results/weave.seed-2.json: the per-episode log is not what" in r.stderr
+    assert f"low episode {EPISODES - 1}" in r.stderr
+
+
+def test_agent_rerun_catches_records_that_are_not_the_agents(repo: Path) -> None:
+    """Direct's high episodes replaced by Weave's on the same episodes: every record is what
+    its decisions give (the replay passes), but they are not Direct's decisions."""
+    res = repo / "leaderboard" / "results"
+    direct, weave = _lines(res / "direct.jsonl.gz"), _lines(res / "weave.jsonl.gz")
+    forged = [
+        next(w for w in weave if (w["scenario"], w["episode"]) == (d["scenario"], d["episode"]))
+        if d["scenario"] == "high"
+        else d
+        for d in direct
+    ]
+    assert forged != direct
+    _rewrite(res / "direct.json", forged)
+    assert replay_result(res / "direct.json") == (4 * EPISODES, [])
+    r = cdr(*CHECK, "--rerun-batches", 4, "--sample-seed", 1, cwd=repo)
+    assert r.returncode == 1, r.stderr
+    assert "results/direct.json: direct: agent re-run on" in r.stderr
+    assert "tolerance 99 %" in r.stderr
+    assert "--sample-seed 1" in r.stderr
+
+
+NOISY_AGENT = textwrap.dedent(
+    """
+    import os
+    import numpy as np
+
+    FLIP = {flip}
+
+    class Agent:
+        def __init__(self, observation_space, action_space):
+            self.rng = np.random.default_rng(int.from_bytes(os.urandom(8), "little"))
+
+        def reset(self, seed):
+            pass
+
+        def act_batch(self, observations, masks):
+            a = np.full(len(observations), 13)
+            flip = self.rng.random(len(a)) < FLIP  # a near-tie that falls the other way
+            return np.where(flip & (masks[:, 4] == 1), 4, a)
+
+        def act(self, observation):
+            return 13
+    """
+)
+
+
+@pytest.mark.parametrize("flip, passes", [(0.0, True), (0.2, False)])
+def test_rerun_tolerance(repo: Path, flip: float, passes: bool) -> None:
+    """An agent whose decisions are not reproducible passes while few of them differ and fails
+    when many do; the disagreements are listed."""
+    (repo / "agents" / "noisy").mkdir()
+    (repo / "agents" / "noisy" / "agent.py").write_text(NOISY_AGENT.format(flip=0.0))
+    lb = repo / "leaderboard"
+    (lb / "submissions" / "noisy.yaml").write_text(submission_yaml("agents/noisy"))
+    r = cdr(
+        "leaderboard",
+        "build",
+        "--evaluate",
+        "noisy",
+        "--reference",
+        "weave",
+        "--workers",
+        1,
+        cwd=repo,
+    )
+    assert r.returncode == 0, r.stderr
+    (repo / "agents" / "noisy" / "agent.py").write_text(NOISY_AGENT.format(flip=flip))
+    # the identity changed with the file: put the committed identity back so that only the
+    # decisions differ (as they would on another CPU with the same files)
+    doc = json.loads((lb / "results" / "noisy.json").read_text())
+    from cdr_bench.evaluate.loader import agent_identity
+
+    doc["agent"] = agent_identity(repo / "agents" / "noisy" / "agent.py", checkpoint=None)
+    doc["agent"]["path"] = "agents/noisy/agent.py"
+    (lb / "results" / "noisy.json").write_text(json.dumps(doc, indent=1) + "\n")
+    r = cdr(*CHECK, "--evaluate", "noisy", "--rerun-batches", 4, cwd=repo)
+    assert "noisy: agent re-run on" in r.stderr, r.stderr
+    if passes:
+        assert "100.00 %" in r.stderr
+    else:
+        assert r.returncode == 1 and "disagreements" in r.stderr, r.stderr
+
+
+def test_agreement_verdict_applies_the_stated_tolerance() -> None:
+    def batch(asked: int, agree: int) -> dict:
+        return {"scenario": "high", "batch": 0, "decisions": asked, "agree": agree}
+
+    assert MIN_AGREEMENT == 0.99
+    assert agreement_verdict("x", [batch(1000, 990)])[1]
+    assert not agreement_verdict("x", [batch(1000, 989)])[1]
+    assert agreement_verdict("x", [batch(0, 0)])[1]
