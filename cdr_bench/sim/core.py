@@ -304,6 +304,14 @@ class Simulator:
         self.all_episodes = np.arange(E)
         self.all_episodes.flags.writeable = False
 
+    def __setstate__(self, state: dict) -> None:
+        """A copy (``pickle``, ``copy.deepcopy``) keeps ``params`` and ``all_episodes``
+        read-only: the kernels are compiled for read-only arrays, and writable ones made the
+        copy's first step compile them again for that type (tens of seconds)."""
+        self.__dict__.update(state)
+        self.params.flags.writeable = False
+        self.all_episodes.flags.writeable = False
+
     # Views of the state arrays (in-place writes go through to them).
     bg_pos_km = property(lambda self: self.pos_km[:, : self.B], doc="(E, B, 2) km")
     bg_vel_km_s = property(lambda self: self.vel_km_s[:, : self.B], doc="(E, B, 2) km/s")

@@ -269,6 +269,8 @@ def test_a_copied_env_continues_exactly_like_the_original(how):
     for _ in range(10):
         env.step({a: hold[a] for a in env.agents})
     twin = copy.deepcopy(env) if how == "deepcopy" else pickle.loads(pickle.dumps(env))
+    # read-only as in the original: the kernels compiled for it serve the copy too
+    assert not twin.sim.params.flags.writeable and not twin.sim.all_episodes.flags.writeable
     rng = np.random.default_rng(0)
     for _ in range(200):
         if not env.agents:
