@@ -24,9 +24,7 @@ def register(sub: Any) -> None:
         "on a random sample of them, and fail (exit code 1, with a diff) if a record, the "
         "agreement, the committed leaderboard or a docs block differs.",
     )
-    b.add_argument(
-        "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
-    )
+    _add_dir(b)
     b.add_argument(
         "--evaluate",
         nargs="*",
@@ -99,15 +97,29 @@ def register(sub: Any) -> None:
         "cdr_bench/evaluate/report.py). Reads result files only; `build` "
         "does this too.",
     )
-    d.add_argument(
-        "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
-    )
+    _add_dir(d)
     d.add_argument(
         "--check",
         action="store_true",
         help="write nothing; exit code 1 and a diff if a block differs from what the files give",
     )
     d.set_defaults(func=_render_docs)
+
+
+def _add_dir(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--dir", default="leaderboard", help="the leaderboard folder (default: leaderboard)"
+    )
+
+
+def _leaderboard_dir(args: argparse.Namespace) -> Path:
+    """``--dir``, which must be a folder."""
+    from cdr_bench.errors import UserError
+
+    d = Path(args.dir)
+    if not d.is_dir():
+        raise UserError(f"--dir {d}: no such folder")
+    return d
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -123,9 +135,7 @@ def _build(args: argparse.Namespace) -> int:
         raise UserError(f"--sample-seed: expected 0..2**63-1, got {args.sample_seed}")
     if args.cpu_limit < 1 or args.memory_limit < 64 or args.timeout <= 0:
         raise UserError("--cpu-limit, --memory-limit (>= 64 MiB) and --timeout must be positive")
-    d = Path(args.dir)
-    if not d.is_dir():
-        raise UserError(f"--dir {d}: no such folder")
+    d = _leaderboard_dir(args)
     opts = Options(
         leaderboard_dir=d,
         evaluate=args.evaluate,
@@ -169,9 +179,4 @@ def _docs(lb_dir: Path, check: bool) -> int:
 
 
 def _render_docs(args: argparse.Namespace) -> int:
-    from cdr_bench.errors import UserError
-
-    d = Path(args.dir)
-    if not d.is_dir():
-        raise UserError(f"--dir {d}: no such folder")
-    return _docs(d, args.check)
+    return _docs(_leaderboard_dir(args), args.check)
