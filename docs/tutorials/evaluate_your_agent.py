@@ -14,6 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from cdr_bench.evaluate.results import read_episodes, read_result
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 
@@ -34,13 +36,15 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     mine, direct = out / "level_change.json", out / "direct.json"
 
     # 1. Score the agent: its own process, the same episodes for every agent (seeded by the
-    #    scenario, its config hash and the episode index). Writes a JSON summary and a JSONL
-    #    with one record per aircraft and episode.
+    #    scenario, its config hash and the episode index). Writes a JSON (the run) and a
+    #    gzip JSONL beside it (one record per episode: each aircraft's outcome, events and
+    #    decisions).
     run = ["--scenario", a.scenario, "--episodes", str(a.episodes), "--no-progress", "--force"]
     cdr_bench("evaluate", str(HERE / "level_change_agent.py"), *run, "--out", str(mine))
 
-    # 2. Read the result: one entry per scenario, metrics per role with 95 % intervals.
-    result = json.loads(mine.read_text())
+    # 2. Read the result: one entry per scenario, metrics per role with 95 % intervals
+    #    (read_result checks the pair of files and computes the metrics from the records).
+    result = read_result(mine)
     (scenario,) = result["scenarios"]
     metrics = scenario["metrics"]["ownship"]
     print(f"\n{result['agent']['name']} on {scenario['id']}, {scenario['episodes']} episodes:")
@@ -50,7 +54,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         low, high = m["ci95"]
         print(f"  {name:18s} {m['value']:8.3f}   95 % interval [{low:.3f}, {high:.3f}]")
         summary[name] = m["value"]
-    records = [json.loads(line) for line in mine.with_suffix(".jsonl").read_text().splitlines()]
+    records = read_episodes(mine, result)
     print(f"  per-episode records: {len(records)} (first: {sorted(records[0])[:6]} ...)")
 
     # 3. Compare with a shipped agent on the same episodes: paired differences B - A.
