@@ -6,10 +6,10 @@ episode, docs/model.md §10.4) and its decision latency. Subcommands ``multimoda
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -227,8 +227,8 @@ def heatmap(
 ) -> None:
     """Fig. 9 style: three 3x3 panels (climb / level / descend), heading change x speed change,
     of the successful first actions as shares of all samples; with ``all_counts`` a first row
-    shows every sampled first action. Written atomically (temporary file in the same folder,
-    then ``os.replace``)."""
+    shows every sampled first action. Written atomically
+    (:func:`~cdr_bench.evaluate.results.atomic_write_text`)."""
     try:
         import matplotlib
     except ImportError:
@@ -262,30 +262,14 @@ def heatmap(
                 )
         fig.colorbar(im, ax=axes[i, :].tolist(), shrink=0.8, label="share of all samples")
     fig.suptitle(title)
-    out = Path(out_png)
+    out, png = Path(out_png), io.BytesIO()
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp.png", dir=out.parent)
+        fig.savefig(png, format="png", dpi=80)
     except OSError as e:
-        plt.close(fig)
         raise UserError(f"{out}: cannot write it ({e.strerror or e})") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            fig.savefig(f, format="png", dpi=80)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, out)
-    except OSError as e:
-        Path(tmp).unlink(missing_ok=True)
-        raise UserError(f"{out}: cannot write it ({e.strerror or e})") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     finally:
         plt.close(fig)
+    atomic_write_text(out, png.getvalue())
 
 
 def multimodal(
