@@ -29,7 +29,7 @@ from cdr_bench.rl.sb3_policies import ppo_actor, td3_actor  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 DIFFUSION_CHECKPOINTS = [ROOT / "agents" / "diffusion_ac" / "checkpoint.pt"] + sorted(
-    (ROOT / "agents" / "diffusion_ac" / "ablations").glob("*-100k.pt")
+    (ROOT / "agents" / "diffusion_ac" / "ablations").glob("*/checkpoint.pt")
 )
 
 
@@ -181,7 +181,7 @@ def test_masked_classes_are_never_chosen():
 
 
 @pytest.mark.artefacts
-@pytest.mark.parametrize("path", DIFFUSION_CHECKPOINTS, ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", DIFFUSION_CHECKPOINTS, ids=lambda p: p.parent.name)
 def test_shipped_diffusion_checkpoints_same_actions_on_simulator_states(path):
     pol = load_policy(str(path))
     ck = torch.load(path, map_location="cpu", weights_only=True)
