@@ -116,18 +116,29 @@ def _analyses(spec: dict[str, Any], options: Any) -> None:
     rp = spec.get("replays")
     if rp and rp["scenarios"]:
         n = min(rp["episodes"], spec["episodes"], spec["batch_size"])
-        traces = {
-            sc: record_traces(
-                spec["agent"],
-                sc,
-                n,
-                base_seed=spec["seed"],
-                agent_options=options,
-                batch_size=spec["batch_size"],
-                n_episodes=spec["episodes"],
-            )
-            for sc in rp["scenarios"]
-        }
+        if spec.get("rerun") is not None:  # the check: from the committed decisions
+            from cdr_bench.evaluate.results import read_episodes, read_result
+            from cdr_bench.leaderboard.verify import replayed_traces
+
+            try:
+                result = read_result(spec["rerun"]["result"])
+                eps = read_episodes(spec["rerun"]["result"], result)
+            except ValueError as e:
+                raise UserError(str(e)) from None
+            traces = {sc: replayed_traces(result, eps, sc, n) for sc in rp["scenarios"]}
+        else:
+            traces = {
+                sc: record_traces(
+                    spec["agent"],
+                    sc,
+                    n,
+                    base_seed=spec["seed"],
+                    agent_options=options,
+                    batch_size=spec["batch_size"],
+                    n_episodes=spec["episodes"],
+                )
+                for sc in rp["scenarios"]
+            }
         doc = {"kind": REPLAY_KIND, "base_seed": spec["seed"], "episodes": n, "traces": traces}
         atomic_write_text(Path(rp["out"]), json.dumps(doc, separators=(",", ":")) + "\n")
 

@@ -107,6 +107,23 @@ def check_batch(
     return out
 
 
+def replayed_traces(
+    result: dict[str, Any], episodes: list[dict[str, Any]], scenario: str, n: int
+) -> list[dict[str, Any]]:
+    """The trajectories of the first ``n`` episodes of ``scenario`` flown from their recorded
+    decisions (what :func:`cdr_bench.evaluate.api.record_traces` records with the agent, for
+    an honest record: the same first batch, seeds and decisions)."""
+    size, base_seed = int(result["batch_size"]), int(result["base_seed"])
+    sc = next(s for s in result["scenarios"] if s["id"] == scenario)
+    total = int(sc["episodes"])
+    first = [e for e in episodes if e.get("scenario") == scenario][: min(size, total)]
+    replay = [[str(a.get("actions", "")) for a in e["aircraft"]] for e in first]
+    got = run_batch(
+        None, load_scenario(scenario), base_seed, 0, size, total, trace=n, replay=replay
+    )
+    return list(got["traces"])
+
+
 def replay_result(path: str | Path, first: int | None = None) -> tuple[int, list[str]]:
     """Replay every committed episode of a result file (only the first ``first`` episodes of
     each scenario, rounded up to whole batches, when given). Returns (episodes replayed,
