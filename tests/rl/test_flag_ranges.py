@@ -7,8 +7,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -17,6 +15,8 @@ from cdr_bench.errors import UserError
 from cdr_bench.rl.cli import TRAINERS, args_class
 from cdr_bench.rl.common import FLAG_RANGES, from_namespace
 from cdr_bench.scale.config import load_sweep
+
+from .helpers import cdr_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 SWEEPS = sorted([*ROOT.glob("sweeps/*.yaml"), *ROOT.glob("sweeps/seeds/*.yaml")])
@@ -81,12 +81,7 @@ def test_out_of_range_values_are_refused_when_parsed(name, flag, value, words, c
 )
 def test_inconsistent_flags_are_one_line_errors_before_the_run_dir(tmp_path, name, flags, words):
     run = tmp_path / "run"
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "train", name, "--run-dir", str(run), *flags],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    r = cdr_bench("train", name, "--run-dir", str(run), *flags)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert words in r.stderr
     assert not run.exists()

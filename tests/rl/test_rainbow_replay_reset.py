@@ -2,6 +2,9 @@
 transition counts) on a tiny budget, and continuing after an interruption."""
 
 import json
+import subprocess
+import sys
+from types import SimpleNamespace
 
 import pytest
 
@@ -10,6 +13,20 @@ from .helpers import sweep_script
 torch = pytest.importorskip("torch")
 
 rrr = sweep_script("rainbow_replay_reset")
+
+
+@pytest.fixture(autouse=True)
+def _train_in_process(monkeypatch):
+    """The script's ``python -m cdr_bench train ...`` runs by :func:`cdr_bench.cli.main` in this
+    process (the schedule is what is tested here, not the process it starts)."""
+    from cdr_bench.cli import main
+
+    def run(cmd):
+        assert cmd[:4] == [sys.executable, "-m", "cdr_bench", "train"], cmd
+        return subprocess.CompletedProcess(cmd, main(cmd[3:]))
+
+    monkeypatch.setattr(rrr, "subprocess", SimpleNamespace(run=run))
+
 
 TINY = [
     "--n-envs", "4", "--log-every", "100", "--checkpoint-every", "200", "--width", "16",
