@@ -1,13 +1,11 @@
 """Every trainer of ``cdr-bench train`` on tiny budgets: end to end through the CLI (log,
 checkpoint, resume, curve, and the shipped agent.py loading the checkpoint it wrote), resuming
-equals not stopping, and curriculum promotion inside the off-policy loop."""
+equals not stopping, and curriculum promotion inside the off-policy loop. Everything runs in this
+process."""
 
 import argparse
 import importlib
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +16,7 @@ torch = pytest.importorskip("torch")
 from cdr_bench.rl.cli import TRAINERS  # noqa: E402
 from cdr_bench.rl.common import RunLog  # noqa: E402
 
-from .helpers import ROOT, cdr_bench, summary  # noqa: E402
+from .helpers import agent_module, cdr_bench, summary  # noqa: E402
 
 TINY = [
     "--n-envs", "4", "--log-every", "100", "--checkpoint-every", "200",
@@ -52,7 +50,7 @@ def test_every_trainer_is_tested():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(AGENT_DIR))
-def test_tiny_training_run_and_agent(tmp_path, name):
+def test_tiny_training_run_and_agent(tmp_path, monkeypatch, name):
     d = tmp_path / "run"
     flags = [*TINY, *EXTRA[name], "--curve-episodes", "10"]  # the default 100: args.json
     r = cdr_bench("train", name, "--run-dir", str(d), "--total-steps", "256", *flags)
@@ -81,30 +79,21 @@ def test_tiny_training_run_and_agent(tmp_path, name):
     assert meta["step"] >= 512 and meta["algorithm"] == name
 
     # The shipped agent.py loads this checkpoint (weights only) and follows the protocol.
-    code = (
-        "import numpy as np, importlib.util as u\n"
-        f"s = u.spec_from_file_location('a', 'agents/{AGENT_DIR[name]}/agent.py')\n"
-        "m = u.module_from_spec(s); s.loader.exec_module(m)\n"
-        "a = m.Agent(None, None)\n"
-        "o = np.random.default_rng(0).uniform(-1, 1, (256, 42)).astype(np.float32)\n"
-        "k = np.ones((256, 27), np.int8); k[:128, 2::3] = 0; k[128:, 0::3] = 0\n"
-        "a.reset(3); x = a.act_batch(o, k); a.reset(3); y = a.act_batch(o, k)\n"
-        "assert (x == y).all() and x.dtype == np.int64 and ((0 <= x) & (x < 27)).all()\n"
-        "masked_ok = bool((k[np.arange(256), x] == 1).all())\n"
-        "assert isinstance(a.act({'observation': o[0], 'action_mask': k[0]}), int)\n"
-        "print('ok', masked_ok)\n"
-    )
-    r = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        env=dict(os.environ, CDR_BENCH_CHECKPOINT=str(d / "checkpoint.pt")),
-        timeout=60,
-    )
-    assert r.stdout.startswith("ok"), r.stderr
-    if name in MASKED:
-        assert r.stdout.split()[1] == "True"  # a masked agent never picks a masked action
+    monkeypatch.setenv("CDR_BENCH_CHECKPOINT", str(d / "checkpoint.pt"))
+    a = agent_module(AGENT_DIR[name]).Agent(None, None)
+    monkeypatch.undo()
+    o = np.random.default_rng(0).uniform(-1, 1, (256, 42)).astype(np.float32)
+    k = np.ones((256, 27), np.int8)
+    k[:128, 2::3] = 0
+    k[128:, 0::3] = 0
+    a.reset(3)
+    x = a.act_batch(o, k)
+    a.reset(3)
+    y = a.act_batch(o, k)
+    assert (x == y).all() and x.dtype == np.int64 and ((0 <= x) & (x < 27)).all()
+    assert isinstance(a.act({"observation": o[0], "action_mask": k[0]}), int)
+    if name in MASKED:  # a masked agent never picks a masked action
+        assert (k[np.arange(256), x] == 1).all()
 
 
 def train_in_process(name: str, run_dir: Path, *flags: str) -> dict:
