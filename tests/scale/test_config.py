@@ -1,7 +1,9 @@
-"""Sweep files: strict validation, trial keys, the shipped sweeps."""
+"""Sweep files: strict validation, trial keys, the shipped sweeps. Commands run in this process
+(:func:`cdr_bench.cli.main`); the import check has a process of its own."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,10 +11,33 @@ from pathlib import Path
 import pytest
 import yaml
 
+from cdr_bench.cli import main
 from cdr_bench.errors import UserError
 from cdr_bench.scale.config import load_sweep
 
 from .helpers import REPO, tiny_sweep
+
+
+@pytest.fixture
+def cdr(capsys):
+    """``cdr(*args, cwd=None)``: ``cdr-bench ARGS`` in ``cwd``; a CompletedProcess with its exit
+    code and output."""
+
+    def run(*args: object, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+        capsys.readouterr()
+        before = os.getcwd()
+        try:
+            if cwd is not None:
+                os.chdir(cwd)
+            code = main([str(a) for a in args])
+        except SystemExit as e:  # argparse's own errors
+            code = e.code if isinstance(e.code, int) else 1
+        finally:
+            os.chdir(before)
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(list(args), code, out, err)
+
+    return run
 
 
 def _edit(path: Path, **changes) -> Path:
@@ -85,20 +110,8 @@ def test_sensitivity_grid_is_fig7():
     assert len(sweep.trials) == 3 * (1 + 4 + 4 + 3 + 3)
 
 
-def test_smoke_sweep_dry_run():
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cdr_bench",
-            "sweep",
-            str(REPO / "sweeps" / "smoke.yaml"),
-            "--dry-run",
-        ],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-    )
+def test_smoke_sweep_dry_run(cdr):
+    r = cdr("sweep", REPO / "sweeps" / "smoke.yaml", "--dry-run", cwd=REPO)
     assert r.returncode == 0, r.stderr
     assert "4 trials" in r.stdout
 
@@ -107,26 +120,18 @@ def test_smoke_sweep_dry_run():
     ("cpus", "words"),
     [("0", "expected a whole number >= 1"), ("1", "fewer than the 2 CPUs each trial")],
 )
-def test_num_cpus_that_could_never_run_a_trial_is_refused(tmp_path, cpus, words):
+def test_num_cpus_that_could_never_run_a_trial_is_refused(cdr, tmp_path, cpus, words):
     """A local Ray with no CPU, or fewer than a trial asks for, would wait for ever."""
     path = _edit(tiny_sweep(tmp_path, [1]), num_cpus_per_trial=2)
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "sweep", str(path), "--num-cpus", cpus],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=tmp_path,
-    )
+    r = cdr("sweep", path, "--num-cpus", cpus, cwd=tmp_path)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert f"--num-cpus {cpus}: {words}" in r.stderr
     assert not (tmp_path / "runs").exists()
 
 
-def test_cli_error_is_one_line(tmp_path):
+def test_cli_error_is_one_line(cdr, tmp_path):
     path = _edit(tiny_sweep(tmp_path, [1]), bogus=1)
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "sweep", str(path)], capture_output=True, text=True
-    )
+    r = cdr("sweep", path)
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0
     assert "bogus" in r.stderr
@@ -164,12 +169,8 @@ def test_reduced_run_overrides(tmp_path):
         load_sweep(path, overrides={"nope": 1})
 
 
-def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(tmp_path):
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "scenarios", "show", "low"],
-        capture_output=True,
-        text=True,
-    )
+def test_scenario_yaml_relative_to_sweep_file_and_empty_fixed(cdr, tmp_path):
+    r = cdr("scenarios", "show", "low")
     (tmp_path / "scen").mkdir()
     (tmp_path / "scen" / "mine.yaml").write_text(r.stdout)
     path = _edit(
@@ -204,13 +205,7 @@ def test_where_selects_trials_with_the_whole_sweeps_keys():
 
 
 @pytest.mark.parametrize("arg", ["ablation", "ablation=[1", "ablation=nope"])
-def test_where_errors_from_the_cli(arg):
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "sweep", str(REPO / "sweeps" / "table3.yaml")]
-        + ["--dry-run", "--where", arg],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-    )
+def test_where_errors_from_the_cli(cdr, arg):
+    r = cdr("sweep", REPO / "sweeps" / "table3.yaml", "--dry-run", "--where", arg, cwd=REPO)
     assert r.returncode == 2 and "--where" in r.stderr
     assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr

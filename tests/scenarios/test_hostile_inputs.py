@@ -3,8 +3,6 @@ the field, never a traceback, a hang or unbounded memory (the CLI: exit code 2, 
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -309,26 +307,19 @@ def test_parallel_env_with_a_wrong_scenario_argument(bad):
         cdr_bench.parallel_env(scenario=bad)
 
 
-def test_cli_validate_every_hostile_file_in_one_run(tmp_path):
+def test_cli_validate_every_hostile_file_in_one_run(tmp_path, capsys):
+    from cdr_bench.cli import main
+
     paths = [str(_write(tmp_path, name, content)) for name, content, _, _ in CASES]
     names = [n for n, _ in REGISTRY_NAMES]
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "scenarios", "validate", *paths, *names],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 2 and r.stdout == ""
-    assert "Traceback" not in r.stderr
-    errors = [line for line in r.stderr.splitlines() if line.startswith("error ")]
-    assert len(errors) == len(paths) + len(names), r.stderr
+    assert main(["scenarios", "validate", *paths, *names]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and "Traceback" not in err
+    errors = [line for line in err.splitlines() if line.startswith("error ")]
+    assert len(errors) == len(paths) + len(names), err
     for p in paths:
         assert any(p in line for line in errors), p
-    r = subprocess.run(
-        [sys.executable, "-m", "cdr_bench", "scenarios", "show", "../../.."],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert r.stderr.count("\n") == 1 and "not a registry scenario name" in r.stderr
+    assert main(["scenarios", "show", "../../.."]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.count("\n") == 1 and "not a registry scenario name" in err
