@@ -287,10 +287,10 @@ def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[
     return result
 
 
-def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
+def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str, Any]:
     """A result JSON, checked for kind and schema version, and against its per-episode log
-    (present, same SHA-256), with each scenario's ``metrics`` computed from the log;
-    ``ValueError`` naming the file otherwise."""
+    (present, same SHA-256), with each scenario's ``metrics`` computed from the log (unless
+    ``metrics`` is false); ``ValueError`` naming the file otherwise."""
     p = Path(path)
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
@@ -332,7 +332,8 @@ def read_result(path: str | os.PathLike[str]) -> dict[str, Any]:
         )
     if not isinstance(data.get("scenarios"), list):
         raise ValueError(f"{p}: scenarios: expected a list")
-    return add_metrics(data, _parse_episodes(ep, text, digest))
+    eps = _parse_episodes(ep, text, digest)
+    return add_metrics(data, eps) if metrics else data
 
 
 def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:

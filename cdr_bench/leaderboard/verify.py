@@ -21,13 +21,14 @@ decision, :data:`~cdr_bench.evaluate.runner.ACTION_CODE`). Two checks follow fro
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.evaluate.results import read_episodes, read_result
+from cdr_bench.evaluate.results import SCHEMA_VERSION, read_episodes, read_result
 from cdr_bench.evaluate.runner import ReplayMismatch, run_batch
 from cdr_bench.scenarios import load_scenario
 
@@ -70,13 +71,14 @@ def check_batch(
 ) -> BatchCheck:
     """Replay one batch of a result (with ``agent``: and ask it at every step) and compare the
     records with the committed ones."""
-    size, base_seed = int(result["batch_size"]), int(result["base_seed"])
+    size = int(result["batch_size"])
+    base_seed = int(result["base_seed"])
     sc = next(s for s in result["scenarios"] if s["id"] == scenario)
     n = int(sc["episodes"])
     start, stop = batch * size, min((batch + 1) * size, n)
     committed = [e for e in episodes if e.get("scenario") == scenario][start:stop]
     out = BatchCheck(scenario, batch, [], episodes=len(committed))
-    config = load_scenario(scenario)
+    config = _scenario(scenario)
     if config.config_hash() != sc["config_hash"]:
         out.differences.append(
             f"scenario {scenario}: its configuration changed since the evaluation (config hash "
@@ -118,9 +120,7 @@ def replayed_traces(
     total = int(sc["episodes"])
     first = [e for e in episodes if e.get("scenario") == scenario][: min(size, total)]
     replay = [[str(a.get("actions", "")) for a in e["aircraft"]] for e in first]
-    got = run_batch(
-        None, load_scenario(scenario), base_seed, 0, size, total, trace=n, replay=replay
-    )
+    got = run_batch(None, _scenario(scenario), base_seed, 0, size, total, trace=n, replay=replay)
     return list(got["traces"])
 
 
@@ -130,10 +130,12 @@ def replay_result(path: str | Path, first: int | None = None) -> tuple[int, list
     differences as readable lines; empty: the file is what the simulator gives)."""
     p = Path(path)
     try:
-        result = read_result(p)
+        result = read_result(p, metrics=False)
         episodes = read_episodes(p, result)
     except ValueError as e:
         return 0, [str(e)]
+    if result.get("schema_version") != SCHEMA_VERSION:
+        return 0, [f"{p}: schema {result.get('schema_version')}: no decisions to replay"]
     size = int(result["batch_size"])
     n_done, diffs = 0, []
     for scenario, k in batches_of(result):
@@ -146,6 +148,11 @@ def replay_result(path: str | Path, first: int | None = None) -> tuple[int, list
         if more > 0:
             diffs.append(f"  ... and {more} more episodes of {scenario} batch {k} differ")
     return n_done, diffs
+
+
+@functools.lru_cache(maxsize=64)
+def _scenario(name: str) -> Any:
+    return load_scenario(name)
 
 
 def agreement_verdict(name: str, batches: list[dict[str, Any]]) -> tuple[str, bool]:
