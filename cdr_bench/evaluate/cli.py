@@ -83,8 +83,9 @@ def register(sub: Any) -> None:
         help="Markdown table of result files (every metric and role, 95 %% intervals)",
         description="One Markdown table over result JSON files (one row per agent, scenario "
         "and aircraft role, every metric with its 95 % interval), rendered by "
-        "cdr_bench.evaluate.report like every other results table. The tables in the "
-        "repository's docs are rendered by `cdr-bench leaderboard build` / `render-docs`.",
+        "cdr_bench.evaluate.report with the column list and number formats of every results "
+        "table. The tables in the repository's docs are rendered by `cdr-bench leaderboard "
+        "build` / `render-docs`.",
     )
     r.add_argument("results", nargs="+", help="result JSON files")
     r.add_argument("--out", default=None, help="write here instead of printing")

@@ -33,8 +33,8 @@ so deterministic) for means. For learning intruders every aircraft-episode count
 per-record fact it reads, its aggregate (rate with the Wilson interval, mean with the bootstrap
 interval, Poisson rate per flight hour), its direction, its headers and number format, and
 whether it is a detail column. Everything else reads it: :func:`group_metrics` (so every result
-read), the tables of :mod:`cdr_bench.evaluate.report` (``COLUMNS`` / ``MAIN_COLUMNS``, thence
-the leaderboard's pages and ``leaderboard.json``), the paired comparison of
+read), the tables of :mod:`cdr_bench.evaluate.report` (``COLUMNS``) and of the leaderboard
+(``MAIN_COLUMNS``, thence its pages and ``leaderboard.json``), the paired comparison of
 :mod:`cdr_bench.evaluate.compare` (:meth:`Metric.paired`) and the trainers' quick evaluation
 (:meth:`Metric.point`). :func:`register_metric` adds one at run time over facts already in the
 records; no result file changes (files hold facts, metrics are computed when read).

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
+from cdr_bench.evaluate.report import COLUMNS
+from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
 
 DPI = 80
 

@@ -18,19 +18,15 @@ import base64
 import json
 from typing import Any
 
-from cdr_bench.evaluate.report import (
-    COLUMNS,
+from cdr_bench.evaluate.report import COLUMNS, Rows, fmt_metric, fmt_value, md_table
+from cdr_bench.leaderboard.page_tables import (
     HIGHER,
     LOWER,
-    Rows,
     claims_table,
     entries_table,
     esc,
-    fmt_metric,
-    fmt_value,
     html_table,
     inline_md,
-    md_table,
     published_table,
     ranking_table,
     scenario_table,

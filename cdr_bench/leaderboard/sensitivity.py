@@ -32,7 +32,7 @@ import numpy as np
 import yaml
 
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.report import study_value
+from cdr_bench.leaderboard.page_tables import study_value
 
 CONFIG = "sensitivity.yaml"
 PUBLISHED = Path("published") / "fig7.yaml"

@@ -1,6 +1,8 @@
 """The results tables of the documentation: which marked block of which file shows what
-(:data:`DOC_BLOCKS`), read from the committed files and rendered by the one table renderer,
-:mod:`cdr_bench.evaluate.report`.
+(:data:`DOC_BLOCKS`), read from the committed files and rendered here (:func:`measured_table`,
+:func:`multimodality_table`, ...) with the number formats and Markdown layout of
+:mod:`cdr_bench.evaluate.report`; the headline and claims blocks are the leaderboard's own
+tables (:mod:`cdr_bench.leaderboard.page_tables`).
 
 A block is the text between ``<!-- name:start -->`` and ``<!-- name:end -->``. Its inputs are
 the leaderboard's result files (``leaderboard/results/<entry>.json`` and
@@ -27,16 +29,25 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.actions import decode
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate import report
+from cdr_bench.evaluate.report import Cell, Rows, fmt_metric, fmt_ms, fmt_value, md_table
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.jsonl import GZ, gunzip_file
 from cdr_bench.jsonl import read_jsonl as _read_jsonl_any
+from cdr_bench.leaderboard.page_tables import (
+    DENSITIES,
+    MAIN_COLUMNS,
+    claims_table,
+    fmt_published,
+    ranking_table,
+)
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published, load_published
 from cdr_bench.leaderboard.submission import Submission, load_submissions
 
@@ -141,11 +152,11 @@ class Repo:
                 ) from None
         return self._results[name]
 
-    def paper_rows(self, name: str) -> list[report.PaperRow]:
+    def paper_rows(self, name: str) -> list[PaperRow]:
         """The paper's rows the entry reproduces (its ``published_as``), one per density."""
         rows = self.submission(name).published_as
         return [
-            report.PaperRow(
+            PaperRow(
                 label=f"{r.row} — paper {r.table} (published)",
                 scenario=r.density,
                 episodes=r.episodes,
@@ -195,6 +206,217 @@ class Repo:
 
 
 # ----------------------------------------------------------------------------------------------
+# The tables of the documentation (pure functions of what :class:`Repo` reads)
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    """A row of the paper's tables, shown beside a measured row of the same scenario."""
+
+    label: str
+    scenario: str
+    episodes: int | None
+    values: Mapping[str, float]
+    """Metric key (as in :data:`COLUMNS`) -> value as published (rates in %)."""
+
+
+def measured_table(
+    entries: Iterable[tuple[str, dict[str, Any], Sequence[PaperRow]]],
+    scenarios: Sequence[str] | None = None,
+    ci: bool = True,
+) -> str:
+    """Ownship metrics of results (``(label, result, paper rows)``), one row per result and
+    scenario (``scenarios``: these only, in the result's order), each followed by the paper's
+    rows of the same scenario, marked *published*."""
+    head = ["agent", "scenario", "episodes", *[c.header for c in MAIN_COLUMNS]]
+    rows: Rows = []
+    for label, res, paper in entries:
+        for sc in res["scenarios"]:
+            if scenarios is not None and sc["id"] not in scenarios:
+                continue
+            m = sc["metrics"]["ownship"]
+            rows.append(
+                [Cell(label), Cell(sc["id"]), Cell(str(m["episodes"]))]
+                + [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in MAIN_COLUMNS]
+            )
+            for p in paper:
+                if p.scenario == sc["id"]:
+                    rows.append(
+                        [
+                            Cell(p.label),
+                            Cell(p.scenario),
+                            Cell("-" if p.episodes is None else str(p.episodes)),
+                        ]
+                        + [Cell(fmt_published(c.kind, p.values.get(c.key))) for c in MAIN_COLUMNS]
+                    )
+    return md_table(head, rows, numeric_from=2)
+
+
+_PSI = {-1: "left", 0: "hold", 1: "right"}
+_V = {-1: "slower", 0: "keep", 1: "faster"}
+_H = {-1: "descend", 0: "level", 1: "climb"}
+
+
+def action_label(a: int) -> str:
+    p, v, h = decode(a)
+    return f"{a} {_PSI[p]}/{_V[v]}/{_H[h]}"
+
+
+def multimodality_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
+    """``cdr-bench multimodal`` results (``(label, its JSON)``): first-action samples, and the
+    mean number of manoeuvre families (left, right, climb, descend, speed) per episode that the
+    successful samples reach, beside the mean the search finds (docs/model.md §10.4)."""
+    head = [
+        "agent",
+        "scenario",
+        "episodes x samples",
+        "families per episode",
+        "found by search",
+        "follow-on success",
+        "modes (successful)",
+        "normalised entropy",
+        "distinct first actions",
+        "most sampled first actions (share of all samples)",
+    ]
+    rows: Rows = []
+    for label, d in runs:
+        counts = d["all"]
+        top = sorted(range(len(counts)), key=lambda a: (-counts[a], a))[:3]
+        total = sum(counts) or 1
+        tops = ", ".join(
+            f"{action_label(a)} ({100 * counts[a] / total:.0f} %)" for a in top if counts[a]
+        )
+        fam, found = d.get("families_mean"), d.get("feasible_families_mean")
+        thr = d.get("threshold")
+        ent = d.get("normalised_entropy")
+        rows.append(
+            [
+                Cell(label),
+                Cell(d["scenario"]),
+                Cell(f"{d.get('episodes', 1)} x {d['samples']}"),
+                Cell("-" if fam is None else f"{fam:.2f}"),
+                Cell("-" if found is None else f"{found:.2f}"),
+                Cell(fmt_value("rate", d["success_rate"])),
+                Cell(f"{d['modes']}" + ("" if thr is None else f" (≥ {100 * thr:g} %)")),
+                Cell("-" if ent is None else f"{ent:.3f}"),
+                Cell(str(sum(1 for c in counts if c))),
+                Cell(tops or "-"),
+            ]
+        )
+    return md_table(head, rows, numeric_from=2, text_from=len(head) - 1)
+
+
+def latency_table(runs: Iterable[tuple[str, dict[str, Any]]]) -> str:
+    """``cdr-bench latency`` results (``(label, its JSON)``): one decision per call, and per
+    decision at the largest batch measured."""
+    head = [
+        "agent",
+        "threads",
+        "median ms / decision (batch 1)",
+        "p99 ms (batch 1)",
+        "largest batch",
+        "median ms / decision (largest batch)",
+    ]
+    rows: Rows = []
+    for label, d in runs:
+        by_batch = {r["batch"]: r for r in d["rows"]}
+        one = by_batch.get(1)
+        big = by_batch[max(by_batch)]
+        rows.append(
+            [
+                Cell(label),
+                Cell(str(d.get("threads", "-"))),
+                Cell("-" if one is None else fmt_ms(one["median_ms_per_decision"])),
+                Cell("-" if one is None else fmt_ms(one["p99_ms"])),
+                Cell(str(big["batch"])),
+                Cell(fmt_ms(big["median_ms_per_decision"])),
+            ]
+        )
+    return md_table(head, rows, numeric_from=1)
+
+
+def latency_detail_table(d: dict[str, Any]) -> str:
+    """Every batch size of one ``cdr-bench latency`` result."""
+    head = ["batch", "calls", "median ms / call", "p99 ms / call", "median ms / decision"]
+    rows = [
+        [
+            Cell(str(r["batch"])),
+            Cell(str(r.get("calls", "-"))),
+            Cell(f"{r['median_ms']:.3f}"),
+            Cell(f"{r['p99_ms']:.3f}"),
+            Cell(f"{r['median_ms_per_decision']:.4f}"),
+        ]
+        for r in d["rows"]
+    ]
+    note = f"{d.get('threads', '-')} thread(s), scenario `{d.get('scenario', '-')}`."
+    return md_table(head, rows, numeric_from=0) + "\n\n" + note
+
+
+def training_summary(final: dict[str, Any], log: str, stages: int | None = None) -> str:
+    """One sentence from the ``final`` line of a Diffusion-AC training log."""
+    of = f" of {stages}" if stages else ""
+    return (
+        f"Training (`{log}`): {final['step']:,} transitions, {final['updates']:,} updates, "
+        f"{final['wall_s'] / 60:.0f} min wall, final DPSC stage {final['stage']}{of}."
+    )
+
+
+def quick_eval_table(runs: Iterable[tuple[str, dict[str, Any]]], scenario: str) -> str:
+    """The trainers' own quick evaluation (``final`` lines of training logs) on ``scenario``."""
+    head = ["run", "transitions", "success", "LoS", "NMAC", "timeout", "episodes"]
+    rows: Rows = []
+    for label, f in runs:
+        e = f[f"eval/{scenario}"]
+        rows.append(
+            [Cell(label), Cell(f"{f['step']:,}")]
+            + [Cell(fmt_value("rate", e[k])) for k in ("success", "los", "nmac", "timeout")]
+            + [Cell(str(e["episodes"]))]
+        )
+    return md_table(head, rows, numeric_from=1)
+
+
+TUNING_FLAGS = ("ent_coef", "combine", "lr", "n_envs", "curriculum", "scenario", "total_steps")
+
+
+def tuning_table(runs: Iterable[tuple[str, str, dict[str, Any], list[dict[str, Any]]]]) -> str:
+    """Tuning runs (``(agent, run, its arguments, its log lines)``): the trainer's quick
+    evaluation per density, or the last rolling training success of a run cut before its
+    budget."""
+    head = [
+        "agent",
+        "run",
+        "key flags",
+        "transitions",
+        "DPSC stage",
+        "success low / medium / high",
+        "LoS low / medium / high",
+    ]
+    rows: Rows = []
+    for agent, run, args, lines in runs:
+        finals = [r["final"] for r in lines if "final" in r]
+        flags = ", ".join(f"{k}={args[k]}" for k in TUNING_FLAGS if k in args)
+        if finals:
+            f = finals[-1]
+            ev = [f[f"eval/{d}"] for d in DENSITIES]
+            cells = [
+                f"{f['step']:,}",
+                str(f["stage"]),
+                " / ".join(f"{e['success']:.2f}" for e in ev),
+                " / ".join(f"{e['los']:.2f}" for e in ev),
+            ]
+        else:
+            last = lines[-1]
+            cells = [
+                f"{last['step']:,} (cut)",
+                str(last.get("curriculum/stage", "-")),
+                f"rolling training success {last.get('charts/success_rolling', 0):.2f}",
+                "-",
+            ]
+        rows.append([Cell(agent), Cell(run), Cell(flags)] + [Cell(c) for c in cells])
+    return md_table(head, rows, numeric_from=3, text_from=5)
+
+
+# ----------------------------------------------------------------------------------------------
 # What each block shows
 
 
@@ -202,32 +424,28 @@ def measured(
     repo: Repo, entries: Iterable[str], scenarios: Sequence[str] | None = None, ci: bool = True
 ) -> str:
     """Entries' result files, each row followed by the paper's row it reproduces."""
-    return report.measured_table(
+    return measured_table(
         [(repo.label(n), repo.result(n), repo.paper_rows(n)) for n in entries], scenarios, ci
     )
 
 
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
-    return report.multimodality_table([run for n in entries for run in repo.multimodal(n)])
+    return multimodality_table([run for n in entries for run in repo.multimodal(n)])
 
 
 def latency(repo: Repo, entries: Iterable[str]) -> str:
-    return report.latency_table([(repo.label(n), repo.latency(n)) for n in entries])
+    return latency_table([(repo.label(n), repo.latency(n)) for n in entries])
 
 
 def training(repo: Repo, name: str, stages: str = "scenarios/curriculum") -> str:
     log = repo.agent_dir(name) / "training_log.jsonl"
     n_stages = len(list((repo.root / stages).glob("stage-*.yaml")))
-    return report.training_summary(
-        _final(log), log.relative_to(repo.root).as_posix(), n_stages or None
-    )
+    return training_summary(_final(log), log.relative_to(repo.root).as_posix(), n_stages or None)
 
 
 def quick_evals(repo: Repo, logs: Iterable[tuple[str, str]], scenario: str) -> str:
     """``(label, training log relative to the repository)`` of short runs."""
-    return report.quick_eval_table(
-        [(label, _final(repo.root / log)) for label, log in logs], scenario
-    )
+    return quick_eval_table([(label, _final(repo.root / log)) for label, log in logs], scenario)
 
 
 def tuning(repo: Repo, pattern: str = "agents/*/tuning/*.log.jsonl") -> str:
@@ -241,7 +459,7 @@ def tuning(repo: Repo, pattern: str = "agents/*/tuning/*.log.jsonl") -> str:
         run = plain.name.removesuffix(".log.jsonl")
         args = _read_json(log.with_name(f"{run}.args.json"))
         runs.append((log.parent.parent.name, run, args, _read_jsonl(log)))
-    return report.tuning_table(runs)
+    return tuning_table(runs)
 
 
 LEARNED = ("diffusion-ac", "ppo", "maskable-ppo", "td3", "safe-dqn-x", "rainbow")
@@ -269,15 +487,15 @@ def headline(repo: Repo) -> str:
     from cdr_bench.leaderboard.render import conclusion
 
     data = _read_json(repo.lb_dir / "leaderboard.json")
-    head, rows, _ = report.ranking_table(data)
-    return "\n\n".join([*conclusion(data), report.md_table(head, rows, numeric_from=3)])
+    head, rows, _ = ranking_table(data)
+    return "\n\n".join([*conclusion(data), md_table(head, rows, numeric_from=3)])
 
 
 def claims(repo: Repo) -> str:
     """The paper's claims and our verdicts, from the committed ``leaderboard.json``."""
     data = _read_json(repo.lb_dir / "leaderboard.json")
-    head, rows = report.claims_table(data)
-    return report.md_table(head, rows, numeric_from=len(head))
+    head, rows = claims_table(data)
+    return md_table(head, rows, numeric_from=len(head))
 
 
 Block = Callable[[Repo], str]
@@ -286,14 +504,14 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
     "README.md": {
         "headline": headline,
         "claims": claims,
-        "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
+        "learned-agents": lambda r: measured(r, LEARNED, DENSITIES),
         "reference-agents": lambda r: measured(r, CLASSICAL, ci=False),
         "multimodality": lambda r: multimodality(r, MULTIMODAL),
         "latency": lambda r: latency(r, LEARNED),
     },
     "agents/BASELINES.md": {
         "tuning": tuning,
-        "learned-agents": lambda r: measured(r, LEARNED, report.DENSITIES),
+        "learned-agents": lambda r: measured(r, LEARNED, DENSITIES),
     },
     "agents/diffusion_ac/README.md": {
         "paper-suite": lambda r: measured(r, ["diffusion-ac"]),
@@ -302,16 +520,16 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
         "design-runs": lambda r: quick_evals(
             r, [(n, f"agents/diffusion_ac/ablations/{n}.log.jsonl.gz") for n in DESIGN_RUNS], "high"
         ),
-        "multimodality": lambda r: report.multimodality_table(
+        "multimodality": lambda r: multimodality_table(
             [*r.multimodal("diffusion-ac"), *r.analysis(*SAMPLE_TARGET, TACTICAL)[1]]
         ),
-        "sample-target": lambda r: report.measured_table(
+        "sample-target": lambda r: measured_table(
             [
                 (f"{r.label('diffusion-ac')}, teacher target", r.result("diffusion-ac"), []),
                 (SAMPLE_TARGET[1], r.analysis(*SAMPLE_TARGET, TACTICAL)[0], []),
             ]
         ),
-        "latency": lambda r: report.latency_detail_table(r.latency("diffusion-ac")),
+        "latency": lambda r: latency_detail_table(r.latency("diffusion-ac")),
     },
 }
 """File (relative to the repository root) -> block name -> what renders it."""

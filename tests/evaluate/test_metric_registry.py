@@ -25,6 +25,7 @@ from cdr_bench.evaluate.metrics import (
     wilson_interval,
 )
 from cdr_bench.evaluate.results import read_episodes, read_result
+from cdr_bench.leaderboard import page_tables
 from tests.leaderboard import conftest as lb_conftest
 from tests.leaderboard.conftest import snapshot
 
@@ -88,7 +89,9 @@ def test_every_metric_is_registered_once_and_group_metrics_computes_them() -> No
     keys = [m.key for m in metrics.METRICS]
     assert len(keys) == len(set(keys))
     assert [c.key for c in report.COLUMNS] == keys
-    assert [c.key for c in report.MAIN_COLUMNS] == [m.key for m in metrics.METRICS if not m.detail]
+    assert [c.key for c in page_tables.MAIN_COLUMNS] == [
+        m.key for m in metrics.METRICS if not m.detail
+    ]
     assert set(metrics.PAPER_FIVE) | set(metrics.FIELD_METRICS) <= set(keys)
     rec = {
         "outcome": "success",

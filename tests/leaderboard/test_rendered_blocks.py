@@ -15,7 +15,7 @@ import pytest
 
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import report
-from cdr_bench.leaderboard import tables
+from cdr_bench.leaderboard import page_tables, tables
 from tests.leaderboard.conftest import ROOT, cdr
 
 DOC_FILES = sorted(
@@ -106,13 +106,13 @@ def test_stale_block_is_detected_and_rewritten(
 def test_renderer_formats_from_one_column_list() -> None:
     heads = [c.header for c in report.COLUMNS]
     assert len(heads) == len(set(heads))
-    assert {c.header for c in report.MAIN_COLUMNS} <= set(heads)
+    assert {c.header for c in page_tables.MAIN_COLUMNS} <= set(heads)
     m = {"value": 0.5, "ci95": [0.25, 0.75]}
     assert report.fmt_metric("rate", m) == "50.0% [25.0, 75.0]"
     assert report.fmt_metric("rate", m, ci=False) == "50.0%"
     assert report.fmt_metric("mean", {"value": None, "ci95": [None, None]}) == "-"
-    assert report.fmt_published("rate", 4.1) == "4.1%"
-    assert report.fmt_published("mean", 953) == "953"
+    assert page_tables.fmt_published("rate", 4.1) == "4.1%"
+    assert page_tables.fmt_published("mean", 953) == "953"
 
 
 def test_no_other_table_generator_is_left() -> None:
