@@ -7,12 +7,28 @@ Byte-deterministic for a given matplotlib version: Agg backend, matplotlib's def
 (whatever the user's matplotlibrc says), no ``Software`` metadata, fixed size and dpi. The
 matplotlib version is recorded in ``index.html`` so that ``--check`` can tell a rendering
 difference from a data difference.
+
+Each plot is a :class:`Plot`: its file name, the function that draws it and that function's
+arguments, which are exactly the part of the leaderboard data it shows (the rows, metrics,
+styles and titles it reads; :func:`plot_specs`). A plot is therefore a function of its
+:meth:`Plot.digest` (those arguments as canonical JSON, this module's source and the matplotlib
+and numpy versions), and ``cdr-bench leaderboard build`` reuses the committed PNG of a plot whose
+digest is unchanged instead of drawing it again (:func:`render_plots` with ``reuse``): the
+digests and the PNGs' SHA-256 are recorded in ``plots/manifest.json`` (:data:`MANIFEST`,
+:func:`plots_manifest`). A reused PNG has the bytes a redraw gives; ``--check`` redraws every
+plot.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import io
+import json
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,6 +37,8 @@ from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
 
 DPI = 80
+MANIFEST = "manifest.json"
+"""The plots folder's record of what each PNG was drawn from (:func:`plots_manifest`)."""
 
 
 def _label(key: str) -> str:
@@ -138,12 +156,20 @@ def _entry_errorbars(
     return ys
 
 
+# ----------------------------------------------------------------------------------------------
+# The plots. Each draws from its own arguments only: the part of the data it shows
+
+
 def _points(
-    data: dict[str, Any], tables: list[dict[str, Any]], key: str, kind: str, title: str
+    styles: dict[str, dict[str, Any]],
+    entries: list[str],
+    tables: list[dict[str, Any]],
+    key: str,
+    kind: str,
+    label: str,
+    title: str,
 ) -> bytes:
     """One marker per entry and scenario with its 95 % interval, entries side by side."""
-    styles = entry_styles(data)
-    entries = _ranked(data)
     fig, ax = _figure(10, 4.2)
     width = 0.8 / max(len(entries), 1)
     scale = 100.0 if kind == "rate" else 1.0
@@ -155,7 +181,7 @@ def _points(
     ax.set_xticks(range(len(tables)), [t["scenario"] for t in tables])
     for i in range(1, len(tables)):
         ax.axvline(i - 0.5, color="0.85", lw=0.8)
-    ax.set_ylabel(f"{_label(key)}" + (" (%)" if kind == "rate" else ""))
+    ax.set_ylabel(f"{label}" + (" (%)" if kind == "rate" else ""))
     ax.set_title(title)
     finite = [abs(v) for v in seen if math.isfinite(v) and v != 0]
     if finite and max(finite) / max(min(finite), 1e-9) > 100 and kind == "mean":
@@ -165,11 +191,15 @@ def _points(
     return _png(fig)
 
 
-def _success_vs_density(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
-    styles = entry_styles(data)
+def _success_vs_density(
+    styles: dict[str, dict[str, Any]],
+    entries: list[str],
+    n_entries: int,
+    tables: list[dict[str, Any]],
+) -> bytes:
     fig, ax = _figure(9, 4.2)
-    n = max(len(data["entries"]), 1)
-    for j, name in enumerate(_ranked(data)):
+    n = max(n_entries, 1)
+    for j, name in enumerate(entries):
         st = styles[name]
         x = [i + 0.3 * (j / n - 0.5) for i in range(len(tables))]
         _entry_errorbars(ax, st, tables, name, "success_rate", 100.0, x, marker=st["marker"])
@@ -182,9 +212,9 @@ def _success_vs_density(data: dict[str, Any], tables: list[dict[str, Any]]) -> b
     return _png(fig)
 
 
-def _latency(data: dict[str, Any], tables: list[dict[str, Any]]) -> bytes:
-    styles = entry_styles(data)
-    entries = _ranked(data)
+def _latency(
+    styles: dict[str, dict[str, Any]], entries: list[str], tables: list[dict[str, Any]]
+) -> bytes:
     fig, ax = _figure(10, 4.2)
     width = 0.8 / max(len(entries), 1)
     for j, name in enumerate(entries):
@@ -221,13 +251,12 @@ def pareto_front(points: list[tuple[str, float, float]]) -> list[str]:
     return [n for _, _, n in sorted(front)]
 
 
-def _pareto(data: dict[str, Any], table: dict[str, Any]) -> bytes:
+def _pareto(styles: dict[str, dict[str, Any]], entries: list[str], table: dict[str, Any]) -> bytes:
     """Safety (LoS rate) against efficiency (extra path of successful flights) on the headline
     scenario, each with its 95 % interval, and the non-dominated front."""
-    styles = entry_styles(data)
     fig, ax = _figure(9, 5)
     pts = []
-    for name in _ranked(data):
+    for name in entries:
         row = _row(table, name)
         if row is None:
             continue
@@ -267,16 +296,20 @@ def _pareto(data: dict[str, Any], table: dict[str, Any]) -> bytes:
     return _png(fig)
 
 
-def _curves(data: dict[str, Any], names: list[str], title: str, key: str = "series") -> bytes:
+def _curves(
+    styles: dict[str, dict[str, Any]],
+    names: list[str],
+    series_of: dict[str, list[Any]],
+    title: str,
+    key: str = "series",
+) -> bytes:
     """A learning curve against transitions, one line per entry (the mean over its logs, with
     the min-max band when it has several seeds): ``series``, the rolling success of training
     episodes, or ``fixed``, the clean success of the greedy policy on the fixed evaluation
-    set."""
-    styles = entry_styles(data)
-    by = {c["entry"]: c for c in data["learning_curves"]}
+    set; ``series_of``: entry -> its curves of that kind."""
     fig, ax = _figure(9, 4.5)
     for name in names:
-        series = [np.asarray(s, float) for s in by[name][key] if s]
+        series = [np.asarray(s, float) for s in series_of[name] if s]
         if not series:
             continue
         st = styles[name]
@@ -314,18 +347,6 @@ def _curves(data: dict[str, Any], names: list[str], title: str, key: str = "seri
     ax.grid(alpha=0.3)
     _legend(fig)
     return _png(fig)
-
-
-def _tactical(data: dict[str, Any]) -> bytes | None:
-    """Success per tactical family with its 95 % interval (fixed encounters are single
-    outcomes, in the table only)."""
-    fams = [t for t in data["tactical"] if not t["fixed"]]
-    if not fams:
-        return None
-    tables = [next(x for x in data["tables"] if x["scenario"] == t["scenario"]) for t in fams]
-    return _points(
-        data, tables, "success_rate", "rate", "Success per tactical family (95 % intervals)"
-    )
 
 
 def _heatmap(mm: dict[str, Any], title: str) -> bytes:
@@ -366,13 +387,13 @@ def _heatmap(mm: dict[str, Any], title: str) -> bytes:
     return _png(fig)
 
 
-def _sensitivity(data: dict[str, Any]) -> bytes:
+def _sensitivity(factors: list[dict[str, Any]]) -> bytes:
     """Paper Fig. 7 beside ours: one panel per factor, our mean ± sd over seeds with the single
     seeds as dots (left axis), the paper's stated numbers on the right axis (its scale differs:
     another simulator), the values the paper recommends shaded."""
     import matplotlib.pyplot as plt
 
-    facs = data["sensitivity"]["factors"]
+    facs = factors
     fig, axes = plt.subplots(
         1, len(facs), figsize=(3.3 * len(facs), 3.2), layout="constrained", squeeze=False
     )
@@ -409,58 +430,294 @@ def _sensitivity(data: dict[str, Any]) -> bytes:
     return _png(fig)
 
 
-def render_plots(data: dict[str, Any]) -> dict[str, bytes]:
-    """``file name -> PNG bytes`` of every plot (names are stable: they are linked), the
-    headline plots first."""
-    import matplotlib
+# ----------------------------------------------------------------------------------------------
+# What each plot draws, its digest, and rendering with reuse
 
-    matplotlib.use("Agg")
-    import matplotlib.style
 
-    out: dict[str, bytes] = {}
-    with matplotlib.style.context("default"), matplotlib.rc_context({"svg.hashsalt": "cdr"}):
-        head = next(
-            (t for t in data["tables"] if t["scenario"] == data["ranking"]["scenario"]), None
-        )
-        if head is not None:
-            out["pareto.png"] = _pareto(data, head)
-        groups = {e["name"]: e["group"] for e in data["entries"]}
-        with_logs = [c["entry"] for c in data["learning_curves"]]
-        learned = [n for n in _ranked(data) if n in with_logs and groups[n] == "learned"]
-        ablations = [n for n in _ranked(data) if n in with_logs and groups[n] == "ablation"]
-        if learned:
-            out["learning_curves.png"] = _curves(
-                data, learned, "Learning curves: rolling success of training episodes"
-            )
-        if ablations:
-            out["learning_curves_ablations.png"] = _curves(
-                data, ablations, "Learning curves of the ablations"
-            )
-        fixed = [
-            n
-            for n in _ranked(data)
-            if n in with_logs
-            and any(c["entry"] == n and c["fixed"] for c in data["learning_curves"])
-        ]
-        if fixed:
-            out["learning_curves_fixed.png"] = _curves(
-                data, fixed, "Learning curves on the fixed evaluation set", key="fixed"
-            )
-        tact = _tactical(data)
-        if tact is not None:
-            out["tactical_success_rate.png"] = tact
-        dens = _density_tables(data)
-        if dens:
-            for c in MAIN_COLUMNS:
-                out[f"{c.key}.png"] = _points(
-                    data, dens, c.key, c.kind, f"{_label(c.key)} per density (95 % intervals)"
-                )
-            out["success_vs_density.png"] = _success_vs_density(data, dens)
-            out["latency.png"] = _latency(data, dens)
-        if (data.get("sensitivity") or {}).get("factors"):
-            out["sensitivity.png"] = _sensitivity(data)
-        names = {e["name"]: e["display_name"] for e in data["entries"]}
-        for mm in data["multimodality"]:
-            fname = f"multimodal-{mm['entry']}-{mm['scenario'].replace('/', '_')}.png"
-            out[fname] = _heatmap(mm, f"{names[mm['entry']]} on {mm['scenario']}")
+@dataclass(frozen=True)
+class Plot:
+    """One plot: its file name, the function that draws it and that function's keyword
+    arguments (JSON data: exactly the part of the leaderboard data the plot shows)."""
+
+    name: str
+    draw: Callable[..., bytes]
+    args: dict[str, Any]
+
+    def digest(self) -> str:
+        """SHA-256 of everything the PNG's bytes depend on: the draw function, its arguments
+        (canonical JSON: sorted keys, exact float repr), this module's source and the
+        matplotlib and numpy versions."""
+        return _sha256(_canonical({"draw": self.draw.__name__, "args": self.args, "code": _code()}))
+
+
+def _canonical(obj: Any) -> bytes:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False).encode()
+
+
+def _sha256(b: bytes) -> str:
+    return hashlib.sha256(b).hexdigest()
+
+
+@functools.cache
+def _code() -> dict[str, str]:
+    """What the drawing code is: this module's source and the versions it draws with."""
+    return {
+        "plots.py": _sha256(Path(__file__).read_bytes()),
+        "matplotlib": matplotlib_version(),
+        "numpy": str(np.__version__),
+    }
+
+
+def _metric_tables(
+    tables: list[dict[str, Any]], entries: list[str], keys: tuple[str, ...]
+) -> list[dict[str, Any]]:
+    """The tables with only the rows of ``entries`` and, of each, only metrics ``keys`` (value
+    and interval)."""
+    return [
+        {
+            "scenario": t["scenario"],
+            "rows": [
+                {
+                    "entry": r["entry"],
+                    "metrics": {
+                        k: {"value": r["metrics"][k]["value"], "ci95": r["metrics"][k]["ci95"]}
+                        for k in keys
+                    },
+                }
+                for r in t["rows"]
+                if r["entry"] in entries
+            ],
+        }
+        for t in tables
+    ]
+
+
+def _styled(data: dict[str, Any], names: list[str]) -> dict[str, dict[str, Any]]:
+    """The styles of ``names`` (each entry's style depends on its rank among all)."""
+    styles = entry_styles(data)
+    return {n: styles[n] for n in names}
+
+
+def _points_plot(
+    data: dict[str, Any], name: str, tables: list[dict[str, Any]], key: str, kind: str, title: str
+) -> Plot:
+    entries = _ranked(data)
+    return Plot(
+        name,
+        _points,
+        {
+            "styles": _styled(data, entries),
+            "entries": entries,
+            "tables": _metric_tables(tables, entries, (key,)),
+            "key": key,
+            "kind": kind,
+            "label": _label(key),
+            "title": title,
+        },
+    )
+
+
+def _curve_plots(data: dict[str, Any], ranked: list[str]) -> list[Plot]:
+    """The learning curves of the learned entries, of the ablations, and on the fixed
+    evaluation set (each plot only when some entry has such curves)."""
+    groups = {e["name"]: e["group"] for e in data["entries"]}
+    curves = {c["entry"]: c for c in data["learning_curves"]}
+    learned = [n for n in ranked if n in curves and groups[n] == "learned"]
+    ablations = [n for n in ranked if n in curves and groups[n] == "ablation"]
+    fixed = [
+        n
+        for n in ranked
+        if n in curves and any(c["entry"] == n and c["fixed"] for c in data["learning_curves"])
+    ]
+    out = []
+    for fname, names, title, key in (
+        (
+            "learning_curves.png",
+            learned,
+            "Learning curves: rolling success of training episodes",
+            "series",
+        ),
+        ("learning_curves_ablations.png", ablations, "Learning curves of the ablations", "series"),
+        (
+            "learning_curves_fixed.png",
+            fixed,
+            "Learning curves on the fixed evaluation set",
+            "fixed",
+        ),
+    ):
+        if names:
+            args = {
+                "styles": _styled(data, names),
+                "names": names,
+                "series_of": {n: curves[n][key] for n in names},
+                "title": title,
+                "key": key,
+            }
+            out.append(Plot(fname, _curves, args))
     return out
+
+
+def _density_plots(
+    data: dict[str, Any], ranked: list[str], dens: list[dict[str, Any]]
+) -> list[Plot]:
+    """One plot per main metric over the density tables, success against density, latency."""
+    out = []
+    for c in MAIN_COLUMNS:
+        title = f"{_label(c.key)} per density (95 % intervals)"
+        out.append(_points_plot(data, f"{c.key}.png", dens, c.key, c.kind, title))
+    styles = _styled(data, ranked)
+    success = {
+        "styles": styles,
+        "entries": ranked,
+        "n_entries": len(data["entries"]),
+        "tables": _metric_tables(dens, ranked, ("success_rate",)),
+    }
+    out.append(Plot("success_vs_density.png", _success_vs_density, success))
+    lat = [
+        {
+            "scenario": t["scenario"],
+            "rows": [
+                {
+                    "entry": r["entry"],
+                    "latency_ms": {
+                        "median": r["latency_ms"]["median"],
+                        "p99": r["latency_ms"]["p99"],
+                    },
+                }
+                for r in t["rows"]
+                if r["entry"] in ranked
+            ],
+        }
+        for t in dens
+    ]
+    latency = {"styles": styles, "entries": ranked, "tables": lat}
+    out.append(Plot("latency.png", _latency, latency))
+    return out
+
+
+def _heatmap_plot(data: dict[str, Any], mm: dict[str, Any]) -> Plot:
+    """The first-action map of one ``cdr-bench multimodal`` result."""
+    display = next(e["display_name"] for e in data["entries"] if e["name"] == mm["entry"])
+    shown = {
+        "all": mm["all"],
+        "success": mm["success"],
+        "samples": mm["samples"],
+        "success_rate": mm["success_rate"],
+        "modes": mm["modes"],
+        "normalised_entropy": mm.get("normalised_entropy"),
+    }
+    return Plot(
+        f"multimodal-{mm['entry']}-{mm['scenario'].replace('/', '_')}.png",
+        _heatmap,
+        {"mm": shown, "title": f"{display} on {mm['scenario']}"},
+    )
+
+
+def plot_specs(data: dict[str, Any]) -> list[Plot]:
+    """Every plot of the leaderboard data, the headline plots first (file names are stable:
+    they are linked)."""
+    out: list[Plot] = []
+    ranked = _ranked(data)
+    head = next((t for t in data["tables"] if t["scenario"] == data["ranking"]["scenario"]), None)
+    if head is not None:
+        table = _metric_tables([head], ranked, ("extra_path_km", "los_rate"))[0]
+        args = {"styles": _styled(data, ranked), "entries": ranked, "table": table}
+        out.append(Plot("pareto.png", _pareto, args))
+    out += _curve_plots(data, ranked)
+    fams = [t for t in data["tactical"] if not t["fixed"]]
+    if fams:  # fixed encounters are single outcomes, in the table only
+        tables = [next(x for x in data["tables"] if x["scenario"] == t["scenario"]) for t in fams]
+        title = "Success per tactical family (95 % intervals)"
+        out.append(
+            _points_plot(data, "tactical_success_rate.png", tables, "success_rate", "rate", title)
+        )
+    dens = _density_tables(data)
+    if dens:
+        out += _density_plots(data, ranked, dens)
+    factors = (data.get("sensitivity") or {}).get("factors")
+    if factors:
+        out.append(Plot("sensitivity.png", _sensitivity, {"factors": factors}))
+    out += [_heatmap_plot(data, mm) for mm in data["multimodality"]]
+    return out
+
+
+def _draw(plot: Plot) -> bytes:
+    """The PNG of one plot (inside :func:`render_plots`' matplotlib settings)."""
+    return plot.draw(**plot.args)
+
+
+def read_manifest(folder: Path) -> dict[str, dict[str, str]]:
+    """``file name -> {"input": digest, "png": sha256}`` of the plots folder's manifest; empty
+    when it is missing or unreadable (every plot is then drawn)."""
+    try:
+        got = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        plots = got["plots"]
+    except (OSError, ValueError, TypeError, KeyError):
+        return {}
+    if not isinstance(plots, dict):
+        return {}
+    return {
+        k: v
+        for k, v in plots.items()
+        if isinstance(v, dict) and isinstance(v.get("input"), str) and isinstance(v.get("png"), str)
+    }
+
+
+def _reused(plot: Plot, folder: Path, manifest: dict[str, dict[str, str]]) -> bytes | None:
+    """The committed PNG of ``plot`` when the manifest records its current digest and the file
+    still has the recorded hash; None otherwise."""
+    rec = manifest.get(plot.name)
+    if rec is None or rec["input"] != plot.digest():
+        return None
+    try:
+        png = (folder / plot.name).read_bytes()
+    except OSError:
+        return None
+    return png if _sha256(png) == rec["png"] else None
+
+
+def render_plots(
+    data: dict[str, Any], reuse: Path | None = None, drawn: list[str] | None = None
+) -> dict[str, bytes]:
+    """``file name -> PNG bytes`` of every plot (names are stable: they are linked), the
+    headline plots first. With ``reuse`` (a plots folder with its :data:`MANIFEST`), a plot
+    whose digest the manifest records, with the PNG there unchanged, is read instead of drawn:
+    the same bytes, since a plot is a function of its digest. ``drawn``: appended the names of
+    the plots drawn."""
+    specs = plot_specs(data)
+    manifest = read_manifest(reuse) if reuse is not None else {}
+    out: dict[str, bytes | None] = {
+        p.name: None if reuse is None else _reused(p, reuse, manifest) for p in specs
+    }
+    todo = [p for p in specs if out[p.name] is None]
+    if todo:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.style
+
+        with matplotlib.style.context("default"), matplotlib.rc_context({"svg.hashsalt": "cdr"}):
+            for p in todo:
+                out[p.name] = _draw(p)
+                if drawn is not None:
+                    drawn.append(p.name)
+    return {k: v for k, v in out.items() if v is not None}
+
+
+def plots_manifest(data: dict[str, Any], plots: dict[str, bytes]) -> bytes:
+    """``plots/manifest.json``: for each plot of ``plots``, the digest of what it was drawn
+    from and the SHA-256 of its PNG (what :func:`render_plots` checks before reusing it)."""
+    code = _code()
+    rec = {
+        p.name: {"input": p.digest(), "png": _sha256(plots[p.name])}
+        for p in plot_specs(data)
+        if p.name in plots
+    }
+    doc = {
+        "about": "what each PNG of this folder was drawn from (written by `cdr-bench "
+        "leaderboard build`; a plot whose input digest is unchanged is not redrawn)",
+        "matplotlib": code["matplotlib"],
+        "numpy": code["numpy"],
+        "plots": rec,
+    }
+    return (json.dumps(doc, indent=1, sort_keys=True, ensure_ascii=False) + "\n").encode()
