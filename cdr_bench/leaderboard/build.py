@@ -2,7 +2,10 @@
 
 * ``build``: render ``README.md``, ``index.html``, ``leaderboard.json`` and ``plots/*.png`` from
   the submissions, the result files in ``results/`` and the training logs the submissions name
-  (nothing is evaluated).
+  (nothing is evaluated). A plot whose input (the part of the data it draws, the plotting code
+  and the matplotlib version: :meth:`.plots.Plot.digest`) is what ``plots/manifest.json``
+  records for the committed PNG is not drawn again: that PNG is kept, with the bytes a redraw
+  gives (:func:`.plots.render_plots`); only the plots that show what changed are redrawn.
 * ``build --evaluate``: first evaluate (and map the first-action distribution and record the
   replayed episodes where a submission asks) every submission (or the named ones), then
   render. Each submission is scored
@@ -29,8 +32,10 @@ field (the JSON), except ``timing`` (wall time, latency: machine-dependent), ``v
 count, the first episodes of each scenario (a multiple of the batch size, so each batch is run
 exactly as it was). Pages byte for byte; PNGs (and the images inside ``index.html``) only when
 this machine's matplotlib is the version that rendered them, otherwise their data is still
-compared through ``leaderboard.json`` and a note says so. Latency shown on the pages comes from
-the committed result files and is never re-measured by ``--check``.
+compared through ``leaderboard.json`` and a note says so; ``--check`` draws every plot (it never
+reuses a committed PNG) and does not compare ``plots/manifest.json`` (a record of what the
+plots were drawn from, not an output). Latency shown on the pages comes from the committed
+result files and is never re-measured by ``--check``.
 """
 
 from __future__ import annotations
@@ -117,9 +122,23 @@ class Options:
 # Rendering
 
 
-def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, bytes]:
-    """Every generated file (relative path -> bytes) from submissions and result files."""
-    from cdr_bench.leaderboard.plots import matplotlib_version, render_plots
+def render_all(
+    lb_dir: Path,
+    results_dir: Path,
+    reference: str,
+    reuse_plots: bool = False,
+    drawn: list[str] | None = None,
+) -> dict[str, bytes]:
+    """Every generated file (relative path -> bytes) from submissions and result files, with
+    ``plots/manifest.json``. ``reuse_plots``: keep each committed PNG of ``lb_dir/plots`` whose
+    input is unchanged (:func:`.plots.render_plots`; the same bytes as drawing it);
+    ``drawn``: appended the names of the plots drawn."""
+    from cdr_bench.leaderboard.plots import (
+        MANIFEST,
+        matplotlib_version,
+        plots_manifest,
+        render_plots,
+    )
     from cdr_bench.leaderboard.render import render_html, render_markdown
     from cdr_bench.leaderboard.sensitivity import load_study
 
@@ -127,7 +146,10 @@ def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, byt
     subs = load_submissions(lb_dir, published.names)
     entries = load_entries(subs, results_dir)
     data = build_data(entries, published, reference, load_study(lb_dir))
-    plots = render_plots(data)
+    if reuse_plots:
+        plots = render_plots(data, reuse=lb_dir / "plots", drawn=drawn)
+    else:
+        plots = render_plots(data)
     files: dict[str, bytes] = {
         "README.md": render_markdown(data, published, list(plots)).encode(),
         "index.html": render_html(
@@ -140,6 +162,7 @@ def render_all(lb_dir: Path, results_dir: Path, reference: str) -> dict[str, byt
         "leaderboard.json": (json.dumps(data, indent=1, ensure_ascii=False) + "\n").encode(),
     }
     files.update({f"plots/{k}": v for k, v in plots.items()})
+    files[f"plots/{MANIFEST}"] = plots_manifest(data, plots)
     return files
 
 
@@ -510,7 +533,7 @@ def compare_pages(lb_dir: Path, files: dict[str, bytes], notes: list[str]) -> li
             f"plots rendered with matplotlib {committed_mpl}, this machine has {now_mpl}: PNG "
             "bytes not compared (their data is, in leaderboard.json)"
         )
-    expected = set(files)
+    expected = {rel for rel in files if rel in PAGES or rel.endswith(".png")}
     present = {"plots/" + p.name for p in (lb_dir / "plots").glob("*.png")} | {
         p for p in PAGES if (lb_dir / p).exists()
     }
@@ -580,11 +603,14 @@ def run(opts: Options) -> int:
             source = new_results
         elif opts.episodes is not None:
             raise UserError("--episodes needs --evaluate or --check (plain build only renders)")
-        files = render_all(lb_dir, source, opts.reference)
+        drawn: list[str] = []
+        files = render_all(lb_dir, source, opts.reference, reuse_plots=True, drawn=drawn)
         commit(lb_dir, stage, files, new_results)
+    n_plots = sum(k.startswith("plots/") and k.endswith(".png") for k in files)
     log(
-        f"wrote {lb_dir}/README.md, index.html, leaderboard.json and "
-        f"{sum(k.startswith('plots/') for k in files)} plots in {time.perf_counter() - t0:.1f} s"
+        f"wrote {lb_dir}/README.md, index.html, leaderboard.json and {n_plots} plots "
+        f"({len(drawn)} drawn, {n_plots - len(drawn)} unchanged) in "
+        f"{time.perf_counter() - t0:.1f} s"
     )
     return 0
 

@@ -44,10 +44,11 @@ from cdr_bench.errors import UserError
 from cdr_bench.evaluate import aggregate
 from cdr_bench.evaluate.compare import compare
 from cdr_bench.evaluate.loader import agent_identity
-from cdr_bench.evaluate.report import COLUMNS, DENSITIES, MAIN_COLUMNS
+from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.evaluate.results import SCHEMA_VERSION, read_episodes, read_result
 from cdr_bench.leaderboard.claims import SCENARIO as CLAIMS_SCENARIO
 from cdr_bench.leaderboard.claims import build_claims
+from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
 from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
@@ -137,10 +138,6 @@ def check_result(sub: Submission, path: Path) -> tuple[dict[str, Any], list[dict
     return result, episodes
 
 
-def canonical_json(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
-
-
 def load_multimodal(path: Path) -> dict[str, Any]:
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
@@ -156,18 +153,22 @@ def load_multimodal(path: Path) -> dict[str, Any]:
     return d
 
 
+def _checked_entry(view: Submission, results_dir: Path, what: str, name: str) -> Entry:
+    """The checked result of one run (a submission or one of its seeds)."""
+    p = result_path(results_dir, view.name)
+    if not p.exists():
+        raise UserError(
+            f"{p}: no result file for {what}; run `cdr-bench leaderboard build --evaluate {name}`"
+        )
+    result, episodes = check_result(view, p)
+    return Entry(view, p, result, episodes=episodes)
+
+
 def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
     """Every submission's checked result (and multimodality files), in submission order."""
     entries = []
     for sub in subs:
-        p = result_path(results_dir, sub.name)
-        if not p.exists():
-            raise UserError(
-                f"{p}: no result file for submission {sub.name}; run "
-                f"`cdr-bench leaderboard build --evaluate {sub.name}`"
-            )
-        result, episodes = check_result(sub, p)
-        e = Entry(sub, p, result, episodes=episodes)
+        e = _checked_entry(sub, results_dir, f"submission {sub.name}", sub.name)
         if sub.replays:
             rp = replays_path(results_dir, sub.name)
             if not rp.exists():
@@ -184,14 +185,8 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
         for view, seed in zip(
             sub.seed_views(), [x for x in sub.seeds if x.checkpoint != sub.checkpoint], strict=True
         ):
-            vp = result_path(results_dir, view.name)
-            if not vp.exists():
-                raise UserError(
-                    f"{vp}: no result file for seed {seed.seed} of {sub.name}; run "
-                    f"`cdr-bench leaderboard build --evaluate {sub.name}`"
-                )
-            r, eps = check_result(view, vp)
-            e.runs.append((seed.seed, Entry(view, vp, r, episodes=eps)))
+            run = _checked_entry(view, results_dir, f"seed {seed.seed} of {sub.name}", sub.name)
+            e.runs.append((seed.seed, run))
         entries.append(e)
     known = {result_path(results_dir, v.name).name for s in subs for v in (s, *s.seed_views())}
     stale = sorted(
