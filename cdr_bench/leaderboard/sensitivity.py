@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.results import read_result
 from cdr_bench.leaderboard.page_tables import study_value
 
 CONFIG = "sensitivity.yaml"
@@ -86,6 +87,15 @@ def _trial(tj: Path) -> tuple[dict[str, Any], dict[str, float], list[list[Any]]]
     if tj.parent.resolve() not in rp.parents:
         raise UserError(f"{tj}: field 'result': {rec['result']!r} is outside the trial's folder")
     res = _read_json(rp)
+    stored = isinstance(res, dict) and all(  # archived (schema 3) results carry metrics
+        isinstance(sc, dict) and "metrics" in sc for sc in res.get("scenarios") or [{}]
+    )
+    if not stored:
+        try:
+            res = read_result(rp)  # metrics computed from the per-episode log
+        except ValueError as e:
+            why = str(e).removeprefix(f"{rp}: ")
+            raise UserError(f"{rp}: not a cdr-bench result file ({why})") from None
     try:
         scen = [[s["id"], int(s["episodes"])] for s in res["scenarios"]]
         return rec, trial_metrics(res), scen
