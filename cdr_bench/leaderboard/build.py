@@ -110,8 +110,8 @@ class Options:
     limits: Limits = field(default_factory=Limits)
     reference: str = DEFAULT_REFERENCE
     all_seeds: bool = False
-    """``--check``: ask the agent of every training seed of every entry again, not the shown
-    seed and one drawn at random."""
+    """``--check``: ask the agent of every training seed of every entry again, not one run per
+    entry drawn at random."""
     sample_seed: int | None = None
     """``--check``: the seed of the agent re-run sample (None: drawn at random, and printed)."""
     rerun_batches: int = 1
@@ -621,14 +621,13 @@ def with_seeds(subs: list[Submission]) -> list[Submission]:
 
 
 def sampled_seeds(subs: list[Submission], rng: random.Random) -> list[Submission]:
-    """Each submission and one of its other seeds drawn with ``rng``: the runs whose agent
-    ``--check`` asks again (``--all-seeds``: every seed)."""
+    """One run of each submission drawn with ``rng`` among its training seeds (the shown one
+    included): the runs whose agent ``--check`` asks again (``--all-seeds``: every run). Every
+    run is replayed whatever is drawn; over checks, every seed's agent is asked in turn."""
     out = []
     for s in subs:
-        out.append(s)
-        views = s.seed_views()
-        if views:
-            out.append(views[rng.randrange(len(views))])
+        runs = [s, *s.seed_views()]
+        out.append(runs[rng.randrange(len(runs))])
     return out
 
 

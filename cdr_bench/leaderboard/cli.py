@@ -49,8 +49,8 @@ def register(sub: Any) -> None:
     b.add_argument(
         "--all-seeds",
         action="store_true",
-        help="--check: ask the agent of every training seed of every entry again (default: the "
-        "shown seed and one other per entry, drawn at random; every seed is always replayed)",
+        help="--check: ask the agent of every training seed of every entry again (default: one "
+        "run per entry, drawn at random among its seeds; every seed is always replayed)",
     )
     b.add_argument(
         "--sample-seed",
