@@ -29,9 +29,10 @@ checkpoint.pt as the sweep wrote them, the per-episode file and the training log
 ``python sweeps/landed.py restore sweeps/landed/<sweep>`` writes it back as a sweep output folder
 (``runs/sweeps/<sweep>/``: ``cdr-bench sweep ... --resume`` skips those trials, this script
 ships them); ``python sweeps/landed.py slim`` drops the checkpoints and per-episode files of a
-study nothing will ship from (they stay in the git history, where ``restore`` finds them). Shipping trials later
-removes their staged copies (one copy of each checkpoint; the staged trials of other settings
-stay); trials whose checkpoint is already shipped into an agent folder are not staged again.
+study nothing will ship from (they stay in the git history, where ``restore`` finds them).
+Shipping trials later removes their staged copies (one copy of each checkpoint; the staged
+trials of other settings stay); trials whose checkpoint is already shipped into an agent folder
+are not staged again.
 A sweep folder given here may hold the logs plain or compressed.
 """
 

@@ -70,13 +70,16 @@ def submission_yaml(agent: str, training: str = "null", **extra: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def cdr(*args: object, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+def cdr(
+    *args: object, cwd: Path, timeout: float = 300, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "cdr_bench", *map(str, args)],
         capture_output=True,
         text=True,
         cwd=cwd,
         timeout=timeout,
+        env=env,
     )
 
 

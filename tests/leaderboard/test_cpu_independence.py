@@ -32,23 +32,14 @@ import numpy as np
 import pytest
 import yaml
 
+from cdr_bench.evaluate.sandbox import CPU_KNOBS
+
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ("diffusion_ac", "ppo", "maskable_ppo", "td3", "rainbow", "safe_dqn_x")
 """The learned agents whose inference must not depend on the CPU (agents/<name>)."""
 RESET_SEED = 20261123
-KNOBS = (
-    "ATEN_CPU_CAPABILITY",
-    "NPY_DISABLE_CPU_FEATURES",
-    "NPY_ENABLE_CPU_FEATURES",
-    "OPENBLAS_CORETYPE",
-    "MKL_ENABLE_INSTRUCTIONS",
-    "MKL_CBWR",
-    "ONEDNN_MAX_CPU_ISA",
-    "DNNL_MAX_CPU_ISA",
-    "NUMBA_CPU_NAME",
-    "NUMBA_CPU_FEATURES",
-    "GLIBC_TUNABLES",
-)
+KNOBS = CPU_KNOBS
+"""Every kernel setting the scorer passes on to an agent (cdr_bench.evaluate.sandbox)."""
 
 
 def _numpy_cpu() -> Any:

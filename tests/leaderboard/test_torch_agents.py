@@ -16,14 +16,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
 
-from tests.leaderboard.conftest import ROOT, submission_yaml
+from tests.leaderboard.conftest import ROOT, cdr, submission_yaml
 from tests.leaderboard.test_cpu_independence import baseline_kernel_env
 
 torch = pytest.importorskip("torch")
@@ -108,17 +106,6 @@ PPO_TORCH = textwrap.dedent(
 )
 
 
-def _cdr(*args: object, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cdr_bench", *map(str, args)],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env=env,
-        timeout=900,
-    )
-
-
 @pytest.mark.slow
 def test_pytorch_agents_pass_the_check_under_other_kernels(repo: Path) -> None:
     agents = repo / "agents"
@@ -147,15 +134,15 @@ def test_pytorch_agents_pass_the_check_under_other_kernels(repo: Path) -> None:
     )
     host = {k: v for k, v in os.environ.items() if k not in baseline_kernel_env()}
     names = ("torch-mlp", "ppo-torch")
-    r = _cdr(
+    r = cdr(
         "leaderboard", "build", "--evaluate", *names, "--reference", "weave", "--workers", 1,
-        cwd=repo, env=host,
+        cwd=repo, env=host, timeout=900,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     other_cpu = {**host, **baseline_kernel_env()}
-    r = _cdr(
+    r = cdr(
         "leaderboard", "build", "--check", "--evaluate", *names, "--reference", "weave",
-        "--workers", 1, "--rerun-batches", 4, cwd=repo, env=other_cpu,
+        "--workers", 1, "--rerun-batches", 4, cwd=repo, env=other_cpu, timeout=900,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     for name in names:
