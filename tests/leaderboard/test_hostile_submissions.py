@@ -10,6 +10,7 @@ with a one-line reason and writes nothing.
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 import textwrap
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from cdr_bench.evaluate.results import read_result
 from cdr_bench.evaluate.sandbox import isolation
 from tests.leaderboard.conftest import EPISODES, ROOT, cdr, submission_yaml
 
@@ -179,8 +181,8 @@ def build(repo: Path) -> tuple[int, str]:
 
 
 def episodes(path: Path) -> list[dict]:
-    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    return rows
+    text = gzip.open(path, "rt").read()
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
 
 
 def test_silent_attacks_have_no_effect(repo: Path, tmp_path: Path) -> None:
@@ -205,9 +207,8 @@ def test_silent_attacks_have_no_effect(repo: Path, tmp_path: Path) -> None:
     unexpected = [k for k in changed if not k.startswith(allowed_prefixes) and k not in allowed]
     assert not unexpected, f"files changed: {unexpected}"
     # the entry scores exactly as the honest agent it wraps
-    assert episodes(results / "evil.jsonl") == episodes(results / "direct.jsonl")
-    evil = json.loads((results / "evil.json").read_text())
-    direct = json.loads((results / "direct.json").read_text())
+    assert episodes(results / "evil.jsonl.gz") == episodes(results / "direct.jsonl.gz")
+    evil, direct = read_result(results / "evil.json"), read_result(results / "direct.json")
     assert [s["metrics"] for s in evil["scenarios"]] == [s["metrics"] for s in direct["scenarios"]]
 
 
