@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import io
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_STEPS, ranged
 from cdr_bench.errors import UserError
 
 # Modules that add subcommands; a module missing from an install is skipped.
@@ -49,11 +51,14 @@ def register(sub: Any) -> None:
     )
     p.add_argument("name", help="registry name or YAML path")
     p.add_argument(
-        "--episodes", type=int, default=1000, help="episodes for holding and the agent (1000)"
+        "--episodes",
+        type=ranged(int, 1, MAX_EPISODES),
+        default=1000,
+        help="episodes for holding and the agent (1000)",
     )
     p.add_argument(
         "--search-episodes",
-        type=int,
+        type=ranged(int, 0, MAX_EPISODES),
         default=200,
         help="episodes searched for manoeuvre families (200; the first of the same episodes)",
     )
@@ -62,10 +67,15 @@ def register(sub: Any) -> None:
         default="agents/mvp",
         help="the reference resolver, run in this process (trusted code only; 'none' skips it)",
     )
-    p.add_argument("--seed", type=int, default=0, help="base seed of the episodes (as evaluate)")
+    p.add_argument(
+        "--seed",
+        type=ranged(int, 0, MAX_SEED),
+        default=0,
+        help="base seed of the episodes (as evaluate)",
+    )
     p.add_argument(
         "--enough",
-        type=int,
+        type=ranged(int, 1, 5),
         default=None,
         help="stop an episode's search once this many families are found (faster; default: "
         "search every family)",
@@ -81,12 +91,19 @@ def register(sub: Any) -> None:
         default=None,
         help="agent file (default: every aircraft holds course, speed and level)",
     )
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--max-frames", type=int, default=400)
-    r.add_argument("--fps", type=int, default=8)
+    r.add_argument("--seed", type=ranged(int, 0, MAX_SEED), default=0, help="episode seed (0)")
+    r.add_argument(
+        "--max-frames",
+        type=ranged(int, 1, MAX_STEPS),
+        default=400,
+        help="stop after this many frames (400)",
+    )
+    r.add_argument(
+        "--fps", type=ranged(int, 1, 100), default=8, help="frames per second, 1 to 100 (8)"
+    )
     r.add_argument(
         "--zoom-km",
-        type=float,
+        type=ranged(float, 0, float("inf"), low_in=False, inf_ok=True),
         default=None,
         help="show this many km around the ownship (default: the encounter in tactical "
         "scenarios, the whole sector otherwise; inf: the whole sector)",
@@ -208,7 +225,7 @@ def _scenarios_certify(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     from cdr_bench.actions import HOLD
     from cdr_bench.env import CDREnv
-    from cdr_bench.evaluate.results import check_output_path
+    from cdr_bench.evaluate.results import atomic_write_text, check_output_path
     from cdr_bench.render import save_gif
 
     out = Path(args.out)
@@ -217,8 +234,6 @@ def _render(args: argparse.Namespace) -> int:
     check_output_path(out)  # before the episode is run
     env = CDREnv(args.scenario, render_mode="rgb_array")
     if args.zoom_km is not None:
-        if not args.zoom_km > 0:
-            raise UserError(f"--zoom-km: expected a number of km > 0 (or inf), got {args.zoom_km}")
         env.render_zoom_km = args.zoom_km
     policy: Any = None
     if args.agent is not None:
@@ -243,14 +258,9 @@ def _render(args: argparse.Namespace) -> int:
         obs, _, _, _, infos = env.step(actions)
         frames.append(env.render())
     outcome = infos.get("ownship_0", {}).get("outcome", "running") if len(frames) > 1 else "-"
-    tmp = out.with_name(f".{out.name}.tmp")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        save_gif(frames, str(tmp), fps=args.fps)
-        tmp.replace(out)
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise UserError(f"--out {args.out}: cannot write it ({e.strerror})") from None
+    gif = io.BytesIO()
+    save_gif(frames, gif, fps=args.fps)
+    atomic_write_text(out, gif.getvalue())  # never replaces anything but a regular file
     print(f"wrote {out} ({len(frames)} frames, ownship outcome: {outcome})")
     return 0
 

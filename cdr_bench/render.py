@@ -27,7 +27,7 @@ import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -598,8 +598,8 @@ class HumanWindow:
         self._plt.close(self._fig)
 
 
-def save_gif(frames: list[NDArray[np.uint8]], path: str, fps: int = 8) -> None:
-    """Write frames as an animated GIF."""
+def save_gif(frames: list[NDArray[np.uint8]], path: str | IO[bytes], fps: int = 8) -> None:
+    """Write frames as an animated GIF to a path or a binary file object."""
     images = [Image.fromarray(f) for f in frames]
     images[0].save(
         path,

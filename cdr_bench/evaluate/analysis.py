@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.actions import HOLD, decode
+from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_STEPS, int_list, ranged
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.cli import add_agent_args, agent_options
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
@@ -39,17 +40,22 @@ def register(sub: Any) -> None:
     mm.add_argument("--scenario", default="tactical/head-on")
     mm.add_argument(
         "--episodes",
-        type=int,
+        type=ranged(int, 1, MAX_EPISODES),
         default=DEFAULT_EPISODES,
         help=f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
     )
     mm.add_argument(
         "--samples",
-        type=int,
+        type=ranged(int, 1, MAX_BATCH_SIZE),
         default=DEFAULT_SAMPLES,
         help=f"samples per episode ({DEFAULT_SAMPLES})",
     )
-    mm.add_argument("--seed", type=int, default=0, help="base seed of the episodes (as evaluate)")
+    mm.add_argument(
+        "--seed",
+        type=ranged(int, 0, MAX_SEED),
+        default=0,
+        help="base seed of the episodes (as evaluate)",
+    )
     mm.add_argument(
         "--search",
         action="store_true",
@@ -57,28 +63,50 @@ def register(sub: Any) -> None:
     )
     mm.add_argument(
         "--max-steps",
-        type=int,
+        type=ranged(int, 0, MAX_STEPS),
         default=0,
         help="cut follow-on rollouts after this many steps (a failure); 0 = horizon",
     )
-    mm.add_argument("--threshold", type=float, default=0.05, help="mass threshold of a mode")
+    mm.add_argument(
+        "--threshold",
+        type=ranged(float, 0, 1),
+        default=0.05,
+        help="mass threshold of a mode, 0 to 1 (0.05)",
+    )
     mm.add_argument("--out", default=None, help="JSON results file (and a .png heat map beside it)")
     add_agent_args(mm)
     mm.set_defaults(func=cmd_multimodal)
 
     la = sub.add_parser("latency", help="decision latency (median / p99 ms) per batch size")
     la.add_argument("agent", help="agent directory or agent.py")
-    la.add_argument("--batch-sizes", default="1,8,64,256")
+    la.add_argument(
+        "--batch-sizes",
+        type=int_list(1, MAX_BATCH_SIZE),
+        default=[1, 8, 64, 256],
+        help=f"comma-separated batch sizes, each 1 to {MAX_BATCH_SIZE} (1,8,64,256)",
+    )
     la.add_argument(
         "--decisions",
-        type=int,
+        type=ranged(int, 1, MAX_STEPS),
         default=1000,
         help="decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
     )
-    la.add_argument("--min-calls", type=int, default=20, help="timed calls per batch size (>=)")
-    la.add_argument("--warmup", type=int, default=20, help="untimed calls before timing")
+    la.add_argument(
+        "--min-calls",
+        type=ranged(int, 1, MAX_STEPS),
+        default=20,
+        help="timed calls per batch size (>=)",
+    )
+    la.add_argument(
+        "--warmup", type=ranged(int, 0, MAX_STEPS), default=20, help="untimed calls before timing"
+    )
     la.add_argument("--scenario", default="medium")
-    la.add_argument("--threads", type=int, default=1)
+    la.add_argument(
+        "--threads",
+        type=ranged(int, 1, 1024),
+        default=1,
+        help="threads of the agent's numerical libraries (1)",
+    )
     la.add_argument("--out", default=None)
     add_agent_args(la)
     la.set_defaults(func=cmd_latency)
@@ -333,6 +361,7 @@ def multimodal(
 def cmd_multimodal(ns: argparse.Namespace) -> int:
     if ns.out:
         check_output_path(ns.out)
+        check_output_path(Path(ns.out).with_suffix(".png"), "--out: the heat map")
     options = agent_options(ns, ns.agent)
     res = multimodal(
         ns.agent,
@@ -382,11 +411,7 @@ def cmd_latency(ns: argparse.Namespace) -> int:
     err = UserError
     if ns.out:
         check_output_path(ns.out)
-    try:
-        sizes = [int(x) for x in ns.batch_sizes.split(",")]
-    except ValueError:
-        msg = f"--batch-sizes: expected integers separated by commas, got {ns.batch_sizes!r}"
-        raise err(msg) from None
+    sizes = list(ns.batch_sizes)
     if min(sizes) < 1 or ns.decisions < 1 or ns.min_calls < 1 or ns.warmup < 0:
         raise err("--batch-sizes, --decisions and --min-calls must be >= 1, --warmup >= 0")
     _check_scenario(ns.scenario)

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
 from cdr_bench.errors import UserError
 
 
@@ -35,10 +36,25 @@ def register(sub: Any) -> None:
         help="registry name or YAML path (repeatable); replaces the default suite",
     )
     p.add_argument("--suite", default=None, help="named suite: paper (the default)")
-    p.add_argument("--episodes", type=int, default=None, help="episodes per scenario (1000)")
-    p.add_argument("--seed", type=int, default=0, help="base seed of the episode seeds (0)")
+    p.add_argument(
+        "--episodes",
+        type=ranged(int, 1, MAX_EPISODES),
+        default=None,
+        help=f"episodes per scenario (1000; at most {MAX_EPISODES})",
+    )
+    p.add_argument(
+        "--seed",
+        type=ranged(int, 0, MAX_SEED),
+        default=0,
+        help="base seed of the episode seeds (0)",
+    )
     p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
-    p.add_argument("--workers", type=int, default=1, help="processes running batches (1)")
+    p.add_argument(
+        "--workers",
+        type=ranged(int, 1, MAX_WORKERS),
+        default=1,
+        help="processes running batches (1)",
+    )
     p.add_argument(
         "--backend",
         choices=("local", "ray"),
@@ -57,9 +73,10 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--batch-size",
-        type=int,
+        type=ranged(int, 1, MAX_BATCH_SIZE),
         default=None,
-        help="episodes stepped in lock-step per batch (200); part of the result key",
+        help=f"episodes stepped in lock-step per batch (200, at most {MAX_BATCH_SIZE}); part of "
+        "the result key",
     )
     add_agent_args(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -94,16 +111,18 @@ def register(sub: Any) -> None:
 
 def add_agent_args(p: argparse.ArgumentParser) -> None:
     """The options of the agent's process (shared by every command that runs an agent)."""
+    from cdr_bench.evaluate.remote import MAX_TIMEOUT_S
+
     p.add_argument(
         "--decision-timeout",
-        type=float,
+        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
         default=None,
         metavar="SECONDS",
         help="time limit of one decision call, enforced from outside the agent's process (10 s)",
     )
     p.add_argument(
         "--load-timeout",
-        type=float,
+        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
         default=None,
         metavar="SECONDS",
         help="time limit of importing and constructing the agent (300 s)",
@@ -155,7 +174,7 @@ def agent_options(args: argparse.Namespace, agent: str) -> Any:
 def _evaluate(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
     from cdr_bench.evaluate.report import summary_text
-    from cdr_bench.evaluate.results import check_output_path
+    from cdr_bench.evaluate.results import check_output_path, episodes_path
     from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
 
     suite = args.suite if (args.suite or args.scenario) else "paper"
@@ -163,7 +182,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     for n in notes:
         print(f"cdr-bench: note: {n}", file=sys.stderr)
     options = agent_options(args, args.agent)
-    out = check_output_path(args.out) if args.out else default_out(args.agent, jobs, suite)
+    out = check_output_path(args.out or default_out(args.agent, jobs, suite))
+    check_output_path(episodes_path(out), "--out: the per-episode log")
     if out.exists() and not (args.force or args.resume):
         raise UserError(
             f"{out} exists (an earlier result); --force overwrites it, --out writes elsewhere"
@@ -183,16 +203,16 @@ def _evaluate(args: argparse.Namespace) -> int:
         address=args.address,
     )
     print(summary_text(result, wide=args.wide))
-    from cdr_bench.evaluate.results import episodes_path
-
     print(f"wrote {out} and {episodes_path(out)}")
     return 0
 
 
 def _compare(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.compare import compare, comparison_table
-    from cdr_bench.evaluate.results import atomic_write_text
+    from cdr_bench.evaluate.results import atomic_write_text, check_output_path
 
+    if args.json:
+        check_output_path(args.json, "--json")
     cmp = compare(args.result_a, args.result_b, scenarios=args.scenario or None)
     for note in cmp.get("notes", []):
         print(f"cdr-bench: note: {note}", file=sys.stderr)

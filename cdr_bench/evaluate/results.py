@@ -56,6 +56,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.checks import MAX_EPISODE_LOG_BYTES, MAX_RESULT_BYTES, file_kind, read_input
 from cdr_bench.errors import UserError
 
 SCHEMA_VERSION = 4
@@ -90,12 +91,24 @@ def partial_path(out: Path) -> Path:
 
 
 def check_output_path(path: str | os.PathLike[str], flag: str = "--out") -> Path:
-    """``path`` as a file a command may write, checked before the command does its work: not a
-    folder, and its nearest existing folder writable (a :class:`UserError` naming ``flag``
-    otherwise). Nothing is created; the writer makes the missing folders."""
+    """``path`` as a file a command may write, checked before the command does its work: a
+    regular file or nothing yet (a folder, a device such as ``/dev/full``, a named pipe or a
+    socket is refused: the writer would replace it), and its nearest existing folder writable
+    (a :class:`UserError` naming ``flag`` otherwise). Nothing is created; the writer makes the
+    missing folders. Every command that writes a file calls this first."""
     p = Path(path)
-    if p.is_dir():
-        raise UserError(f"{flag} {path}: is a folder; expected a file path")
+    try:
+        st = p.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        st = None  # nothing there yet (a file in the way of a folder: below)
+    except OSError as e:
+        raise UserError(f"{flag} {path}: {e.strerror or e}") from None
+    if st is not None:
+        kind = file_kind(st.st_mode)
+        if kind == "a folder":
+            raise UserError(f"{flag} {path}: is a folder; expected a file path")
+        if kind is not None:
+            raise UserError(f"{flag} {path}: is {kind}, not a regular file; expected a file path")
     parent = p.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
@@ -104,6 +117,18 @@ def check_output_path(path: str | os.PathLike[str], flag: str = "--out") -> Path
     if not os.access(parent, os.W_OK | os.X_OK):
         raise UserError(f"{flag} {path}: {parent} is not writable")
     return p
+
+
+def _refuse_non_regular(path: Path) -> None:
+    """A :class:`UserError` if something other than a regular file is at ``path`` (following
+    a symbolic link): :func:`atomic_write_text` never replaces a device, pipe or folder."""
+    try:
+        st = path.stat()
+    except OSError:
+        return  # nothing there (or unreadable: the write says so)
+    kind = file_kind(st.st_mode)
+    if kind is not None:
+        raise UserError(f"{path}: is {kind}, not a regular file; refusing to replace it")
 
 
 def gzip_bytes(text: str) -> bytes:
@@ -118,7 +143,9 @@ def gzip_bytes(text: str) -> bytes:
 def atomic_write_text(path: Path, text: str | bytes) -> None:
     """Write ``text`` (or bytes) to ``path`` so that readers see the old file or the new one,
     never a part: temporary file in the same folder, fsync, ``os.replace``. A path that cannot
-    be written is a :class:`UserError` naming it."""
+    be written is a :class:`UserError` naming it, and so is a ``path`` that holds something
+    other than a regular file (a device, a pipe, a folder): it is never replaced."""
+    _refuse_non_regular(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -132,6 +159,7 @@ def atomic_write_text(path: Path, text: str | bytes) -> None:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; results are ordinary files
+        _refuse_non_regular(path)  # again: something may have appeared there meanwhile
         os.replace(tmp, path)
     except OSError as e:
         Path(tmp).unlink(missing_ok=True)
@@ -253,9 +281,25 @@ def episodes_text(path: Path) -> str:
     """The text of a per-episode log (gzip JSONL); ``ValueError`` naming it if unreadable."""
     try:
         with gzip.open(path, "rb") as f:
-            return f.read().decode("utf-8")
+            raw = f.read(MAX_EPISODE_LOG_BYTES + 1)
+        if len(raw) > MAX_EPISODE_LOG_BYTES:
+            raise ValueError(
+                f"{path}: larger than a per-episode log may be ({MAX_EPISODE_LOG_BYTES} bytes "
+                "uncompressed)"
+            )
+        return raw.decode("utf-8")
     except (OSError, EOFError, UnicodeDecodeError, gzip.BadGzipFile) as e:
         raise ValueError(f"{path}: not a gzip per-episode log ({e})") from None
+
+
+def _legacy_text(path: Path) -> str:
+    """The text of a schema-3 per-episode log (plain JSONL); ``ValueError`` if unreadable."""
+    try:
+        return read_input(path, MAX_EPISODE_LOG_BYTES, "per-episode log").decode("utf-8")
+    except UserError as e:
+        raise ValueError(str(e)) from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{path}: not UTF-8 text ({e})") from None
 
 
 _EPISODES_CACHE: dict[tuple[str, str], list[dict[str, Any]]] = {}
@@ -293,12 +337,10 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
     ``metrics`` is false); ``ValueError`` naming the file otherwise."""
     p = Path(path)
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"{p}: no such result file") from None
-    except IsADirectoryError:
-        raise ValueError(f"{p}: is a folder, not a result file") from None
-    except (OSError, UnicodeDecodeError) as e:
+        data = json.loads(read_input(p, MAX_RESULT_BYTES, "result file").decode("utf-8"))
+    except UserError as e:  # missing, a folder, a device or pipe, too large, unreadable
+        raise ValueError(str(e)) from None
+    except UnicodeDecodeError as e:
         raise ValueError(f"{p}: unreadable ({e})") from None
     except (json.JSONDecodeError, RecursionError) as e:
         raise ValueError(f"{p}: not a JSON result file ({str(e)[:80]})") from None
@@ -323,7 +365,7 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
     ep = p.parent / name
     if not ep.is_file():
         raise ValueError(f"{p}: its per-episode file {ep} is missing")
-    text = ep.read_text(encoding="utf-8") if legacy else episodes_text(ep)
+    text = _legacy_text(ep) if legacy else episodes_text(ep)
     digest = sha256_text(text)
     if digest != data.get("episodes_sha256"):
         raise ValueError(
@@ -345,5 +387,5 @@ def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -
     cached = _EPISODES_CACHE.get((str(p.resolve()), digest))
     if cached is not None:
         return cached
-    text = p.read_text(encoding="utf-8") if p.suffix == ".jsonl" else episodes_text(p)
+    text = _legacy_text(p) if p.suffix == ".jsonl" else episodes_text(p)
     return _parse_episodes(p, text, sha256_text(text))
