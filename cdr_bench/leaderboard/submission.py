@@ -36,20 +36,32 @@ seed, ``results/<name>.seed-<k>.json`` for the others) and the leaderboard aggre
 
 Paths (``agent``, ``checkpoint``, a ``reference`` that is not a URL) are relative to the
 repository root, i.e. the folder holding ``leaderboard/``, and must stay inside it.
+
+A submission file is read like a scenario file (:mod:`cdr_bench.scenarios.loader`): at most
+:data:`MAX_FILE_BYTES`, UTF-8, no YAML anchors, aliases, tags, merge keys or duplicate keys,
+nested at most 20 deep. Free text (``display_name``, ``description``, ``authors``,
+``reference``, ``training``) is one line, without control or invisible characters, within the
+length caps of :mod:`cdr_bench.leaderboard.text`; a display name holds letters, digits, spaces
+and a little punctuation, and no two entries' display names look alike
+(:func:`~cdr_bench.leaderboard.text.skeleton`). Every such problem of a file is reported at
+once; :func:`load_submissions` reports those of every file.
 """
 
 from __future__ import annotations
 
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 import yaml
 
-from cdr_bench.errors import UserError
+from cdr_bench.errors import ScenarioError, UserError, short_repr
+from cdr_bench.leaderboard import text as tx
+from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_problem
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
 GROUPS = ("scripted", "learned", "ablation")
@@ -60,14 +72,67 @@ CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
 ``weights_only=True``, safetensors, ``numpy.load`` with ``allow_pickle=False``)."""
 
 
+MAX_FILE_BYTES = 1 << 20
+"""Largest submission file read (1 MiB, the scenario files' cap; the shipped ones are below
+2 KiB)."""
+MAX_LISTED = 20
+"""An error with more problems lists this many."""
+
+
 class SubmissionError(UserError):
     """A submission file is invalid; the message names the file, the field and what was
-    expected."""
+    expected: one line, or with several problems (``problems``: (field, message) pairs) a first
+    line ``SOURCE: N errors:`` and one line per problem."""
 
-    def __init__(self, source: str | os.PathLike[str], field: str, message: str):
+    def __init__(
+        self,
+        source: str | os.PathLike[str],
+        field: str,
+        message: str,
+        *,
+        more: Sequence[tuple[str, str]] = (),
+    ):
         self.source = str(source)
         self.field = field
-        super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+        self.problems = [(field, message), *more]
+        if not more:
+            super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+            return
+        lines = [f"{source}: {len(self.problems)} errors:"]
+        lines += [f"  {f}: {m}" if f else f"  {m}" for f, m in self.problems[:MAX_LISTED]]
+        if len(self.problems) > MAX_LISTED:
+            lines.append(f"  ... and {len(self.problems) - MAX_LISTED} more")
+        super().__init__("\n".join(lines))
+
+    @classmethod
+    def of(
+        cls, source: str | os.PathLike[str], problems: Sequence[tuple[str, str]]
+    ) -> SubmissionError:
+        """One error carrying every (field, message) problem of ``source``."""
+        (field, message), *more = problems
+        return cls(source, field, message, more=more)
+
+
+class _SubmissionYamlLoader(_ScenarioYamlLoader):
+    """The scenario files' hardened YAML loader (no aliases, anchors, tags, merge keys or
+    duplicate keys; bounded depth and integers), naming submission files in its messages."""
+
+    _kind = "submission files"
+
+
+def _read_yaml(src: Path) -> Any:
+    """The parsed file, read like a scenario file; every failure a :class:`SubmissionError`."""
+    try:
+        text = _read_text(src)
+    except ScenarioError as e:
+        raise SubmissionError(src, "", e.message) from None
+    try:
+        return yaml.load(text, Loader=_SubmissionYamlLoader)  # noqa: S506 - a SafeLoader
+    except yaml.YAMLError as e:
+        problem = _yaml_problem(e).removeprefix("invalid YAML")
+        raise SubmissionError(src, "", f"not valid YAML{problem}") from None
+    except RecursionError:  # pragma: no cover - the loader's depth cap stops nesting first
+        raise SubmissionError(src, "", "not valid YAML: nested too deep") from None
 
 
 @dataclass(frozen=True)
@@ -172,6 +237,13 @@ def _str_list(src: Path, field: str, v: Any, *, allow_empty: bool) -> tuple[str,
 
 
 def _repo_path(src: Path, field: str, value: str, root: Path) -> Path:
+    if len(value) > tx.REFERENCE_MAX or not value.isprintable() or "`" in value:
+        raise SubmissionError(
+            src,
+            field,
+            f"expected a path of at most {tx.REFERENCE_MAX} printable characters without "
+            f"backticks, got {short_repr(value)}",
+        )
     p = Path(value)
     if p.is_absolute() or ".." in p.parts:
         raise SubmissionError(
@@ -278,20 +350,22 @@ def load_submission(
         raise SubmissionError(
             src, "", "file name must be lower-case letters, digits and dashes (it is the entry id)"
         )
-    try:
-        data = yaml.safe_load(src.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise SubmissionError(src, "", f"cannot be read ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        raise SubmissionError(src, "", f"not valid YAML ({str(e).splitlines()[0]})") from None
+    data = _read_yaml(src)
     if not isinstance(data, dict):
         raise SubmissionError(src, "", f"expected a mapping of fields, got {type(data).__name__}")
-    for key in data:
-        if key not in FIELDS:
-            raise SubmissionError(src, str(key), f"unknown field (known: {', '.join(FIELDS)})")
-    for key, (required, _) in FIELDS.items():
-        if required and key not in data:
-            raise SubmissionError(src, key, "missing required field")
+    problems = [
+        (_key_label(key), f"unknown field (known: {', '.join(FIELDS)})")
+        for key in data
+        if key not in FIELDS
+    ]
+    problems += [
+        (key, "missing required field")
+        for key, (required, _) in FIELDS.items()
+        if required and key not in data
+    ]
+    problems += _text_problems(data)
+    if problems:
+        raise SubmissionError.of(src, problems)
 
     agent = _str(src, "agent", data["agent"])
     assert agent is not None
@@ -314,7 +388,9 @@ def load_submission(
 
     reference = _str(src, "reference", data["reference"])
     assert reference is not None
-    if not reference.startswith(("https://", "http://")):
+    if reference.startswith(("https://", "http://")):
+        _url(src, "reference", reference)
+    else:
         _repo_path(src, "reference", reference, root)
 
     training = _str(src, "training", data["training"], allow_none=True)
@@ -424,6 +500,58 @@ def load_submission(
     )
 
 
+TEXT_FIELDS: dict[str, int] = {
+    "display_name": tx.NAME_MAX,
+    "description": tx.DESCRIPTION_MAX,
+    "reference": tx.REFERENCE_MAX,
+    "training": tx.TRAINING_MAX,
+}
+"""Free-text fields and their length caps (``authors``: :data:`~.text.AUTHOR_MAX` each)."""
+
+
+def _text_problems(data: dict[str, Any]) -> list[tuple[str, str]]:
+    """Every problem of the free-text fields given as strings (other types are reported by
+    the field's own check): see :func:`cdr_bench.leaderboard.text.text_problems`."""
+    values: list[tuple[str, Any, int]] = [(k, data.get(k), n) for k, n in TEXT_FIELDS.items()]
+    authors = data.get("authors")
+    out: list[tuple[str, str]] = []
+    if isinstance(authors, list):
+        if len(authors) > tx.AUTHORS_MAX:
+            out.append(
+                ("authors", f"expected at most {tx.AUTHORS_MAX} authors, got {len(authors)}")
+            )
+        values += [
+            (f"authors[{i}]", a, tx.AUTHOR_MAX) for i, a in enumerate(authors[: tx.AUTHORS_MAX])
+        ]
+    for field, v, limit in values:
+        if isinstance(v, str):
+            name = field == "display_name"
+            out += [(field, m) for m in tx.text_problems(v.strip(), limit=limit, name=name)]
+    training = data.get("training")
+    if isinstance(training, str) and "`" in training:
+        out.append(("training", "a backtick is not allowed (the command is shown as code)"))
+    return out
+
+
+def _key_label(key: Any) -> str:
+    """A key as named in a message: itself when short and printable, else quoted and cut."""
+    ok = isinstance(key, str) and key.isprintable() and len(key) <= 40
+    return str(key) if ok else short_repr(key, 40)
+
+
+def _url(src: Path, field: str, value: str) -> None:
+    """An http(s) URL: a host, no spaces or quotes."""
+    try:
+        parts = urlsplit(value)
+        ok = parts.scheme in ("http", "https") and bool(parts.hostname)
+    except ValueError:
+        ok = False
+    if not ok or any(c.isspace() or c in "\"'<>`" for c in value):
+        raise SubmissionError(
+            src, field, f"expected an http(s) URL with a host, got {short_repr(value)}"
+        )
+
+
 def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
     if v is None:
         return ()
@@ -491,7 +619,27 @@ def load_submissions(
     others = sorted(p.name for p in sub.iterdir() if p.suffix in (".yml", ".json"))
     if others:
         raise UserError(f"{sub}: submissions are .yaml files; rename {', '.join(others)}")
-    subs = [load_submission(f, d.resolve().parent, published_names) for f in files]
+    subs, errors = [], []
+    for f in files:
+        try:
+            subs.append(load_submission(f, d.resolve().parent, published_names))
+        except SubmissionError as e:
+            errors.append(str(e))
+    seen: dict[str, Submission] = {}
+    for s in subs:
+        key = tx.skeleton(s.display_name)
+        if key in seen:
+            other = seen[key]
+            same = "the same as" if other.display_name == s.display_name else "looks like"
+            errors.append(
+                f"{s.source}: display_name: {short_repr(s.display_name)} {same} "
+                f"{short_repr(other.display_name)} of {other.source}; display names must differ "
+                "after Unicode normalisation, case folding and confusable letters"
+            )
+        else:
+            seen[key] = s
+    if errors:
+        raise UserError("\n".join(errors))
     claimed: dict[str, Submission] = {}
     for s in subs:
         for row in s.published_as:

@@ -152,21 +152,23 @@ class _ScenarioYamlLoader(yaml.SafeLoader):
     integers."""
 
     _depth = 0
+    _kind = "scenario files"
+    """Named in the messages (a subclass reads other files with the same rules)."""
 
     def compose_node(self, parent: Node | None, index: Any) -> Node | None:
         if self.check_event(AliasEvent):
             event = self.peek_event()
             raise ComposerError(
-                None, None, "aliases (*name) are not allowed in scenario files", event.start_mark
+                None, None, f"aliases (*name) are not allowed in {self._kind}", event.start_mark
             )
         event = self.peek_event()
         if getattr(event, "anchor", None) is not None:
             raise ComposerError(
-                None, None, "anchors (&name) are not allowed in scenario files", event.start_mark
+                None, None, f"anchors (&name) are not allowed in {self._kind}", event.start_mark
             )
         if getattr(event, "tag", None) is not None:
             raise ComposerError(
-                None, None, "tags (!!name) are not allowed in scenario files", event.start_mark
+                None, None, f"tags (!!name) are not allowed in {self._kind}", event.start_mark
             )
         self._depth += 1
         try:
