@@ -7,6 +7,10 @@ from pathlib import Path
 from typing import Any
 
 import cdr_bench.scale.ray_eval  # noqa: F401  (registers the evaluator's "ray" backend)
+from cdr_bench.checks import MAX_EPISODES, ranged
+
+MAX_TOTAL_STEPS = 10**10
+"""Largest ``--total-steps`` of a sweep (the longest shipped recipe trains 3e6 steps)."""
 
 
 def register(sub: Any) -> None:
@@ -23,13 +27,22 @@ def register(sub: Any) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: local Ray)")
     p.add_argument("--resume", action="store_true", help="skip the trials already finished")
     p.add_argument(
-        "--num-cpus", type=int, default=None, help="CPUs of the local Ray (all of this machine)"
+        "--num-cpus",
+        type=ranged(int, 1, 4096),
+        default=None,
+        help="CPUs of the local Ray (all of this machine)",
     )
     p.add_argument(
-        "--total-steps", type=int, default=None, help="replace budget.total_steps (reduced run)"
+        "--total-steps",
+        type=ranged(int, 1, MAX_TOTAL_STEPS),
+        default=None,
+        help="replace budget.total_steps (reduced run)",
     )
     p.add_argument(
-        "--episodes", type=int, default=None, help="replace evaluation.episodes (reduced run)"
+        "--episodes",
+        type=ranged(int, 1, MAX_EPISODES),
+        default=None,
+        help="replace evaluation.episodes (reduced run)",
     )
     p.add_argument("--seeds", default=None, help="replace seeds: comma-separated, e.g. 1,2")
     p.add_argument(
@@ -112,6 +125,8 @@ def _sweep(args: argparse.Namespace) -> int:
                 f"each trial of {args.sweep} asks for (num_cpus_per_trial)"
             )
     out = Path(args.out) if args.out else Path("runs") / "sweeps" / sweep.name
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {out}: exists and is not a folder (a sweep writes a folder)")
     if args.dry_run:
         for t in sweep.trials:
             print(f"{t.key}  {t.factor:14s} {t.label:16s} seed {t.seed}")

@@ -33,6 +33,7 @@ from typing import Any
 
 import yaml
 
+from cdr_bench.checks import MAX_CONFIG_BYTES, read_input
 from cdr_bench.errors import UserError
 
 RESERVED_FLAGS = ("run-dir", "seed", "total-steps", "max-wall-minutes", "resume", "progress")
@@ -199,9 +200,9 @@ def load_sweep(
     keys as the whole."""
     source = Path(path)
     try:
-        raw = yaml.safe_load(source.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise UserError(f"{source}: cannot read: {e.strerror}") from None
+        raw = yaml.safe_load(read_input(source, MAX_CONFIG_BYTES, "sweep file").decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise UserError(f"{source}: not UTF-8 text ({e.reason} at byte {e.start})") from None
     except yaml.YAMLError as e:
         raise UserError(f"{source}: not valid YAML: {str(e).splitlines()[0]}") from None
     raw = _mapping(source, "", raw, _TOP_KEYS)

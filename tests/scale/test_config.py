@@ -118,14 +118,17 @@ def test_smoke_sweep_dry_run(cdr):
 
 @pytest.mark.parametrize(
     ("cpus", "words"),
-    [("0", "expected a whole number >= 1"), ("1", "fewer than the 2 CPUs each trial")],
+    [
+        ("0", "argument --num-cpus: expected a value in [1, 4096], got 0"),
+        ("1", "--num-cpus 1: fewer than the 2 CPUs each trial"),
+    ],
 )
 def test_num_cpus_that_could_never_run_a_trial_is_refused(cdr, tmp_path, cpus, words):
     """A local Ray with no CPU, or fewer than a trial asks for, would wait for ever."""
     path = _edit(tiny_sweep(tmp_path, [1]), num_cpus_per_trial=2)
     r = cdr("sweep", path, "--num-cpus", cpus, cwd=tmp_path)
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert f"--num-cpus {cpus}: {words}" in r.stderr
+    assert words in r.stderr
     assert not (tmp_path / "runs").exists()
 
 
