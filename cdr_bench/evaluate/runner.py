@@ -55,10 +55,17 @@ def spaces_for(config: ScenarioConfig) -> tuple[Any, Any]:
     return observation_space(config), spaces.Discrete(N_ACTIONS)
 
 
-def batch_seed(base_seed: int, scenario_id: str, config_hash: str, batch_index: int) -> int:
-    """Seed passed to ``agent.reset`` before batch ``batch_index``."""
-    key = f"{int(base_seed)}/{scenario_id}/{config_hash}/batch/{int(batch_index)}".encode()
-    return int.from_bytes(hashlib.sha256(key).digest()[:8], "big") >> 1
+def batch_seed(
+    base_seed: int, scenario_id: str, config_hash: str, batch_index: int, agent_key: str = ""
+) -> int:
+    """Seed passed to ``agent.reset`` before batch ``batch_index``. With an ``agent_key`` (a
+    secret drawn by the scorer, e.g. for the fresh episodes of ``leaderboard build --check``)
+    the seed is independent of the episodes' seeds for anyone who does not know the key, so an
+    agent cannot tell from it which episodes it is flying."""
+    key = f"{int(base_seed)}/{scenario_id}/{config_hash}/batch/{int(batch_index)}"
+    if agent_key:
+        key = f"{agent_key}/{key}"
+    return int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "big") >> 1
 
 
 # ----------------------------------------------------------------------------------------------
@@ -104,6 +111,7 @@ def run_batch(
     n_episodes: int,
     trace: int = 0,
     replay: list[list[str]] | None = None,
+    agent_key: str = "",
 ) -> dict[str, Any]:
     """Run batch ``batch_index`` of a scenario (episodes on the fixed grid, at most
     ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``,
@@ -117,7 +125,7 @@ def run_batch(
     reset seed), and its choices are counted against the record in ``"agreement"``
     (``decisions``, ``agree``, ``disagreements``: the first few as ``[episode, aircraft id,
     decision index, recorded, re-run]``) without changing the flight; ``agent=None`` replays
-    only.
+    only. ``agent_key``: see :func:`batch_seed`.
     """
     chash = config.config_hash()
     start = batch_index * batch_size
@@ -128,7 +136,7 @@ def run_batch(
     obs_all, masks_all = env.reset(seeds=seeds)
     if agent is not None:
         try:
-            agent.reset(batch_seed(base_seed, config.id, chash, batch_index))
+            agent.reset(batch_seed(base_seed, config.id, chash, batch_index, agent_key))
         except AgentFault as f:
             at = f"reset(seed) before episodes {start}..{stop - 1} of scenario {config.id!r}"
             raise AgentError(fault_message(f, agent, at)) from None

@@ -73,6 +73,7 @@ from cdr_bench.evaluate.sandbox import (
 )
 from cdr_bench.leaderboard.data import (
     DEFAULT_REFERENCE,
+    HEADLINE_SCENARIO,
     build_data,
     current_identity,
     load_entries,
@@ -84,7 +85,14 @@ from cdr_bench.leaderboard.data import (
 )
 from cdr_bench.leaderboard.published import load_published
 from cdr_bench.leaderboard.submission import Submission, load_submissions
-from cdr_bench.leaderboard.verify import MIN_AGREEMENT, agreement_verdict, batches_of
+from cdr_bench.leaderboard.verify import (
+    FRESH_ALPHA,
+    FRESH_EPISODES,
+    MIN_AGREEMENT,
+    agreement_verdict,
+    batches_of,
+    fresh_verdict,
+)
 
 PAPER_EPISODES = 1000
 BASE_SEED = 0
@@ -115,7 +123,10 @@ class Options:
     sample_seed: int | None = None
     """``--check``: the seed of the agent re-run sample (None: drawn at random, and printed)."""
     rerun_batches: int = 1
-    """``--check``: batches of committed episodes per run on which the agent is asked again."""
+    """``--check``: batches of committed episodes per run on which the agent is asked again
+    (the first drawn among the headline scenario's batches, the others among all)."""
+    fresh_episodes: int = FRESH_EPISODES
+    """``--check``: fresh headline episodes per entry (0: no fresh-episode test)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -631,6 +642,15 @@ def sampled_seeds(subs: list[Submission], rng: random.Random) -> list[Submission
     return out
 
 
+def rerun_sample(grid: list[tuple[str, int]], k: int, rng: random.Random) -> list[Any]:
+    """``k`` batches of ``grid`` (``(scenario, batch)``) drawn at random: the first among the
+    headline scenario's batches (what ranks an entry) where it has any, the rest among all."""
+    head = [g for g in grid if g[0] == HEADLINE_SCENARIO] or grid
+    first = rng.choice(head)
+    rest = [g for g in grid if g != first]
+    return sorted([first, *rng.sample(rest, min(k - 1, len(rest)))])
+
+
 def replay_all(
     views: list[Submission], results_dir: Path, first: int | None, workers: int
 ) -> tuple[int, list[str]]:
@@ -744,17 +764,31 @@ def _check(
             grid = list(batches_of(result))
             if n != committed_n:
                 grid = [(sc, k) for sc, k in grid if k * DEFAULT_BATCH_SIZE < n]
-            picked = sorted(rng.sample(grid, min(opts.rerun_batches, len(grid))))
             reruns[sub.name] = {
                 "result": str(committed.resolve()),
-                "batches": picked,
+                "batches": rerun_sample(grid, opts.rerun_batches, rng),
                 "out": str((scratch / sub.name / "agreement.json").resolve()),
+                "fresh": None,
             }
+            if opts.fresh_episodes and any(s[0] == HEADLINE_SCENARIO for s in grid):
+                reruns[sub.name]["fresh"] = {
+                    "scenario": HEADLINE_SCENARIO,
+                    "episodes": opts.fresh_episodes,
+                    # unpredictable, and printed so that a failure can be looked into
+                    "base_seed": secrets.randbits(62),
+                    "agent_key": secrets.token_hex(16),
+                }
         chosen = [s for s in chosen if s.name in reruns]
         log(
             f"agent re-run sample drawn with --sample-seed {sample_seed}: "
             f"{opts.rerun_batches} batch(es) of {DEFAULT_BATCH_SIZE} episodes per run, "
-            f"tolerance {100 * MIN_AGREEMENT:g} % identical decisions"
+            f"tolerance {100 * MIN_AGREEMENT:g} % identical decisions; "
+            + (
+                f"{opts.fresh_episodes} fresh {HEADLINE_SCENARIO} episodes per entry from seeds "
+                f"drawn now, Fisher exact test at p < {FRESH_ALPHA:g}"
+                if opts.fresh_episodes
+                else "no fresh-episode test (--fresh-episodes 0)"
+            )
         )
         _evaluate_all(chosen, opts, root, fresh, scratch, n, side_by_side=True, reruns=reruns)
         for sub in chosen:
@@ -769,6 +803,13 @@ def _check(
                 )
             if not ok:
                 diffs.append(f"results/{sub.name}.json: {text}")
+            if got.get("fresh") is not None:
+                scored = read_result(result_path(results_dir, sub.name))
+                sc = next(s for s in scored["scenarios"] if s["id"] == HEADLINE_SCENARIO)
+                text, ok = fresh_verdict(sub.name, sc["metrics"]["ownship"], got["fresh"])
+                log(text)
+                if not ok:
+                    diffs.append(f"results/{sub.name}.json: {text}")
             for sc in sub.multimodality:
                 a_p, b_p = (
                     multimodal_path(results_dir, sub.name, sc),

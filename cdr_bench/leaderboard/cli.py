@@ -64,7 +64,15 @@ def register(sub: Any) -> None:
         type=int,
         default=1,
         help="--check: batches of 200 committed episodes per run on which the agent is asked "
-        "again (1)",
+        "again, the first drawn among the headline scenario's (1)",
+    )
+    b.add_argument(
+        "--fresh-episodes",
+        type=int,
+        default=200,
+        help="--check: episodes of the headline scenario, from seeds drawn at check time, on "
+        "which each entry's agent flies and must match its committed score (Fisher's exact "
+        "test, p < 1e-4 fails; 0: no such test) (200)",
     )
     b.add_argument("--workers", type=int, default=2, help="evaluation processes (2)")
     b.add_argument("--cpu-limit", type=int, default=defaults.cpu_s, help="CPU seconds per process")
@@ -131,6 +139,10 @@ def _build(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
     if not 1 <= args.rerun_batches <= 30:
         raise UserError(f"--rerun-batches: expected 1..30, got {args.rerun_batches}")
+    if not 0 <= args.fresh_episodes <= 10_000 or args.fresh_episodes % 200:
+        raise UserError(
+            f"--fresh-episodes: expected a multiple of 200 in 0..10000, got {args.fresh_episodes}"
+        )
     if args.sample_seed is not None and not 0 <= args.sample_seed < 2**63:
         raise UserError(f"--sample-seed: expected 0..2**63-1, got {args.sample_seed}")
     if args.cpu_limit < 1 or args.memory_limit < 64 or args.timeout <= 0:
@@ -147,6 +159,7 @@ def _build(args: argparse.Namespace) -> int:
         all_seeds=args.all_seeds,
         sample_seed=args.sample_seed,
         rerun_batches=args.rerun_batches,
+        fresh_episodes=args.fresh_episodes,
     )
     rc = run(opts)
     if rc == 0 or args.check:

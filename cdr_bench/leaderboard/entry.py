@@ -9,7 +9,8 @@ this one. ``SPEC.json`` is written by the build and holds plain values only.
 
 With ``rerun`` in the spec it scores nothing: it asks the agent again along committed episodes
 (:func:`cdr_bench.leaderboard.verify.check_batch`) and writes how many of its decisions equal the
-recorded ones (``leaderboard build --check``).
+recorded ones (``leaderboard build --check``), and, with ``fresh`` in it, flies the agent on
+episodes nobody has seen (:func:`cdr_bench.leaderboard.verify.fresh_run`).
 
 Besides the result files it maps first-action distributions (``multimodality``) and records the
 trajectories of the first episodes of the scenarios a submission replays
@@ -51,7 +52,7 @@ def _rerun(spec: dict[str, Any], options: Any) -> None:
     agreement and any record that the replay did not reproduce to ``spec["rerun"]["out"]``."""
     from cdr_bench.evaluate.results import atomic_write_text, read_episodes, read_result
     from cdr_bench.evaluate.runner import close_all, load_for
-    from cdr_bench.leaderboard.verify import check_batch
+    from cdr_bench.leaderboard.verify import check_batch, fresh_run
     from cdr_bench.scenarios import load_scenario
 
     rr = spec["rerun"]
@@ -74,9 +75,22 @@ def _rerun(spec: dict[str, Any], options: Any) -> None:
                     "differences": chk.differences,
                 }
             )
+        fr = rr.get("fresh")
+        fresh = None
+        if fr is not None:  # episodes nobody has seen, drawn at check time
+            agent = load_for(agent_file, load_scenario(fr["scenario"]), options)
+            fresh = fresh_run(
+                agent,
+                fr["scenario"],
+                int(fr["base_seed"]),
+                int(fr["episodes"]),
+                str(fr["agent_key"]),
+                int(result["batch_size"]),
+            )
     finally:
         close_all()
-    atomic_write_text(Path(rr["out"]), json.dumps({"batches": batches}) + "\n")
+    doc = {"batches": batches, "fresh": fresh}
+    atomic_write_text(Path(rr["out"]), json.dumps(doc) + "\n")
 
 
 def _evaluate(spec: dict[str, Any], options: Any) -> None:

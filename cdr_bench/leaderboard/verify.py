@@ -17,12 +17,24 @@ decision, :data:`~cdr_bench.evaluate.runner.ACTION_CODE`). Two checks follow fro
   agent that runs an ordinary PyTorch network: a near-tie between two actions (two Q-values or
   logits within float rounding) can fall the other way on another CPU's kernels; such
   disagreements are listed, and the check fails only when they exceed the tolerance.
+* **Fresh episodes** (:func:`fresh_run`, :func:`fresh_verdict`, every entry at each check): the
+  agent flies :data:`FRESH_EPISODES` episodes of the headline scenario that nobody has seen,
+  from a base seed drawn at check time (and an agent reset seed derived with a secret key,
+  :func:`cdr_bench.evaluate.runner.batch_seed`), and its headline rate there must be consistent
+  with the committed one: Fisher's exact test, two-sided, fails at p < :data:`FRESH_ALPHA`.
+  Replay and re-run prove that the committed episodes are the agent's; this proves that the
+  score is not tied to those episodes (an agent that recognises the public episodes and flies a
+  plan made with knowledge of their traffic, or decisions forged on enough episodes to move
+  the score, fail it). Under an honest entry the committed and the fresh episodes are draws
+  from one distribution, so a check raises a false alarm for an entry with probability at most
+  :data:`FRESH_ALPHA` (Fisher's test is exact and conservative).
 """
 
 from __future__ import annotations
 
 import functools
 import json
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +46,13 @@ from cdr_bench.scenarios import load_scenario
 
 MIN_AGREEMENT = 0.99
 """The share of re-run decisions that must equal the recorded ones (per entry and check)."""
+
+FRESH_EPISODES = 200
+"""Fresh episodes of the headline scenario flown per entry at each check."""
+
+FRESH_ALPHA = 1e-4
+"""Two-sided significance level of the fresh-episode test: the false-alarm probability per
+honest entry and check is at most this (about 0.2 % for 16 entries)."""
 
 _LIMIT = 3
 
@@ -148,6 +167,70 @@ def replay_result(path: str | Path, first: int | None = None) -> tuple[int, list
         if more > 0:
             diffs.append(f"  ... and {more} more episodes of {scenario} batch {k} differ")
     return n_done, diffs
+
+
+def fisher_exact(k1: int, n1: int, k2: int, n2: int) -> float:
+    """Two-sided p-value of Fisher's exact test of equal rates, ``k1`` of ``n1`` against ``k2``
+    of ``n2`` (the tables with the same margins no more probable than the observed one; exact
+    integer arithmetic, the tolerance of ``scipy.stats.fisher_exact``)."""
+    if not (0 <= k1 <= n1 and 0 <= k2 <= n2) or n1 + n2 == 0:
+        raise ValueError(f"fisher_exact: counts {k1}/{n1}, {k2}/{n2} are not rates")
+    total, k = n1 + n2, k1 + k2
+    lo, hi = max(0, k - n2), min(k, n1)
+    weights = {x: math.comb(n1, x) * math.comb(n2, k - x) for x in range(lo, hi + 1)}
+    observed = weights[k1]
+    limit = observed * (1 + 1e-7)
+    tail = sum(w for w in weights.values() if w <= limit)
+    return min(1.0, tail / math.comb(total, k))
+
+
+def fresh_run(
+    agent: Any, scenario: str, base_seed: int, episodes: int, agent_key: str, batch_size: int
+) -> dict[str, Any]:
+    """``agent`` on ``episodes`` fresh episodes of ``scenario`` (base seed ``base_seed``, agent
+    reset seeds derived with ``agent_key``): the count and rate of every headline-style metric
+    the check compares (the ownship's ``clean_success_rate`` and ``success_rate``)."""
+    from cdr_bench.evaluate.metrics import scenario_metrics
+
+    config = _scenario(scenario)
+    records: list[dict[str, Any]] = []
+    for k in range(-(-episodes // batch_size)):
+        got = run_batch(agent, config, base_seed, k, batch_size, episodes, agent_key=agent_key)
+        records += got["episodes"]
+    own = scenario_metrics(records)["ownship"]
+    return {
+        "scenario": scenario,
+        "base_seed": base_seed,
+        "episodes": episodes,
+        "metrics": {m: own[m] for m in FRESH_METRICS},
+    }
+
+
+FRESH_METRICS = ("clean_success_rate",)
+"""The metrics the fresh-episode test compares (the headline: what ranks an entry)."""
+
+
+def fresh_verdict(name: str, committed: dict[str, Any], fresh: dict[str, Any]) -> tuple[str, bool]:
+    """A one-line verdict on the fresh-episode test and whether it passes: ``committed`` is the
+    committed result's ownship metrics on the scenario, ``fresh`` what :func:`fresh_run`
+    returned."""
+    parts, ok = [], True
+    for m in FRESH_METRICS:
+        a, b = committed[m], fresh["metrics"][m]
+        p = fisher_exact(int(a["count"]), int(a["n"]), int(b["count"]), int(b["n"]))
+        bad = p < FRESH_ALPHA
+        ok = ok and not bad
+        parts.append(
+            f"{m} {100 * a['count'] / a['n']:.1f} % committed ({a['count']}/{a['n']}), "
+            f"{100 * b['count'] / b['n']:.1f} % on fresh episodes ({b['count']}/{b['n']}), "
+            f"Fisher exact p = {p:.2g}"
+            + (f" < {FRESH_ALPHA:g}: the committed score does not generalise" if bad else "")
+        )
+    text = (
+        f"{name}: {fresh['episodes']} fresh {fresh['scenario']} episodes (base seed "
+        f"{fresh['base_seed']}): " + "; ".join(parts)
+    )
+    return text, ok
 
 
 @functools.lru_cache(maxsize=64)

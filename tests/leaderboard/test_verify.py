@@ -169,3 +169,88 @@ def test_agreement_verdict_applies_the_stated_tolerance() -> None:
     assert agreement_verdict("x", [batch(1000, 990)])[1]
     assert not agreement_verdict("x", [batch(1000, 989)])[1]
     assert agreement_verdict("x", [batch(0, 0)])[1]
+
+
+CLAIRVOYANT_AGENT = textwrap.dedent(
+    """
+    import numpy as np
+
+    from cdr_bench.resolvers import mvp_actions
+
+    # The public episodes' reset seeds (computed beforehand from the public base seed).
+    PUBLIC = {public!r}
+
+    class Agent:
+        def __init__(self, observation_space, action_space):
+            self.known = False
+
+        def reset(self, seed):
+            self.known = seed in PUBLIC
+
+        def act_batch(self, observations, masks):
+            if self.known:  # a plan for an episode it knows (here: the MVP resolver)
+                return mvp_actions(observations, masks)
+            a = np.full(len(observations), 22)  # one it has not seen: circles, never arrives
+            return np.where(masks[np.arange(len(a)), a] == 1, a, 13)
+
+        def act(self, observation):
+            return int(self.act_batch(observation["observation"][None],
+                                      observation["action_mask"][None])[0])
+    """
+)
+
+
+def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path) -> None:
+    """An agent that recognises the public episodes (here from its reset seed; in general from
+    its first observations) flies well on them only: its committed records replay and its
+    re-run agrees, but its score on episodes drawn at check time is not consistent with the
+    committed one."""
+    from cdr_bench.evaluate.runner import batch_seed
+    from cdr_bench.scenarios import load_scenario
+    from tests.leaderboard.conftest import SCENARIOS
+
+    public = {batch_seed(0, s, load_scenario(s).config_hash(), 0) for s in SCENARIOS}
+    (repo / "agents" / "seer").mkdir()
+    (repo / "agents" / "seer" / "agent.py").write_text(CLAIRVOYANT_AGENT.format(public=public))
+    lb = repo / "leaderboard"
+    (lb / "submissions" / "seer.yaml").write_text(submission_yaml("agents/seer"))
+    r = cdr(*CHECK[:2], "--evaluate", "seer", *CHECK[3:], cwd=repo)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((lb / "results" / "seer.json").read_text())
+    high = next(s for s in doc["scenarios"] if s["id"] == "high")
+    from cdr_bench.evaluate.results import read_result
+
+    clean = read_result(lb / "results" / "seer.json")["scenarios"]
+    clean_high = next(s for s in clean if s["id"] == "high")["metrics"]["ownship"]
+    assert high["episodes"] == EPISODES and clean_high["clean_success_rate"]["count"] >= 4
+    # without the fresh-episode test it passes every other check
+    r = cdr(*CHECK, "--fresh-episodes", 0, "--rerun-batches", 4, cwd=repo)
+    assert r.returncode == 0, r.stderr
+    r = cdr(*CHECK, cwd=repo)
+    assert r.returncode == 1, r.stderr
+    assert "seer: 200 fresh high episodes (base seed " in r.stderr
+    assert "the committed score does not generalise" in r.stderr
+    assert "direct: 200 fresh high episodes" in r.stderr  # honest entries pass it
+    assert "results/direct.json" not in r.stderr and "results/weave" not in r.stderr
+
+
+def test_fisher_exact_is_scipys_and_keeps_its_false_alarm_rate() -> None:
+    import numpy as np
+    from scipy.stats import fisher_exact as scipy_fisher
+
+    from cdr_bench.leaderboard.verify import fisher_exact
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        n1, n2 = int(rng.integers(1, 300)), int(rng.integers(1, 300))
+        k1, k2 = int(rng.integers(0, n1 + 1)), int(rng.integers(0, n2 + 1))
+        want = scipy_fisher([[k1, n1 - k1], [k2, n2 - k2]])[1]
+        assert fisher_exact(k1, n1, k2, n2) == pytest.approx(want, rel=1e-9, abs=1e-300)
+    # two samples of one rate: rejected at 5 % no more often than 5 % (exact, conservative)
+    draws = [
+        fisher_exact(int(rng.binomial(1000, 0.94)), 1000, int(rng.binomial(200, 0.94)), 200)
+        for _ in range(1000)
+    ]
+    assert np.mean(np.array(draws) < 0.05) <= 0.05 + 3 * (0.05 * 0.95 / 1000) ** 0.5
+    with pytest.raises(ValueError):
+        fisher_exact(5, 4, 0, 1)
