@@ -73,6 +73,11 @@ class ActionError(ArgumentError):
     value."""
 
 
+class ResetNeeded(UserError, RuntimeError):
+    """An environment was stepped (or its episodes ended) before ``reset`` started them: its
+    state would be zeros, not an episode."""
+
+
 def _field_part(path: str) -> str:
     return f"field '{path}': " if path else ""
 

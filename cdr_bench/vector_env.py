@@ -58,7 +58,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS
-from cdr_bench.errors import ActionError, ArgumentError, short_repr
+from cdr_bench.errors import ActionError, ArgumentError, ResetNeeded, short_repr
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim import Simulator, StepResult, observation_bounds
 from cdr_bench.sim.core import TIMEOUT
@@ -215,6 +215,8 @@ class VectorEnv:
         self.observation_size = 12 + 10 * self.config.observation.neighbours
         self.episode_seeds = np.zeros(num_envs, dtype=np.uint64)
         self._seed_stream = np.random.default_rng(seed)
+        self._started = np.zeros(num_envs, dtype=bool)  # slots reset at least once
+        self._ready = False  # every slot started: step() may run
 
     # -- episodes --------------------------------------------------------------------------------
 
@@ -248,10 +250,13 @@ class VectorEnv:
             chosen = self.draw_seeds(idx.shape[0])
         self.sim.reset(chosen, episodes=idx)
         self.episode_seeds[idx] = chosen
+        if not self._ready:
+            self._started[idx] = True
+            self._ready = bool(self._started.all())
         return self.sim.observe()
 
-    def _checked_slots(self, episodes: Any) -> NDArray[np.int64]:
-        """``reset(episodes=...)``: distinct slot indices in 0..num_envs-1."""
+    def _checked_slots(self, episodes: Any, call: str = "reset") -> NDArray[np.int64]:
+        """``reset(episodes=...)`` (or ``call``'s): distinct slot indices in 0..num_envs-1."""
         try:
             raw = np.asarray(episodes).reshape(-1)
         except (ValueError, TypeError):
@@ -259,15 +264,17 @@ class VectorEnv:
         ok = raw.dtype.kind in "iu" and raw.size == np.unique(raw).size
         if not ok or (raw.size and (raw.min() < 0 or raw.max() >= self.num_envs)):
             raise ArgumentError(
-                f"reset(episodes=...) expects distinct slot indices in 0..{self.num_envs - 1}, "
+                f"{call}(episodes=...) expects distinct slot indices in 0..{self.num_envs - 1}, "
                 f"got {short_repr(episodes)}"
             )
         return raw.astype(np.int64)
 
     def end_episodes(self, episodes: NDArray[np.integer]) -> None:
         """End the given episodes now: every aircraft still flying gets the ``timeout`` outcome
-        (a training-only horizon; the step returned nothing for it)."""
-        idx = np.asarray(episodes, dtype=np.int64)
+        (a training-only horizon; the step returned nothing for it). ``episodes``: distinct
+        slot indices in 0..num_envs-1 (a negative index is refused, not counted from the end)."""
+        self._require_reset("end_episodes")
+        idx = self._checked_slots(episodes, "end_episodes")
         flying = self.sim.ac_active[idx]
         self.sim.ac_outcome[idx] = np.where(flying, TIMEOUT, self.sim.ac_outcome[idx])
         self.sim.active[idx, self.sim.B :] = False
@@ -285,6 +292,8 @@ class VectorEnv:
     def _step(self, actions: NDArray[np.int64]) -> VectorStep:
         """:meth:`step` with actions already checked: the faces that validate their own actions
         (``CDREnv``, ``OwnshipVectorEnv``) call this, so a PettingZoo step is not checked twice."""
+        if not self._ready:
+            self._require_reset("step")
         sim = self.sim
         res = sim.step(actions)
         obs, masks = res.obs, res.action_mask
@@ -297,6 +306,15 @@ class VectorEnv:
             self.episode_seeds[ended] = chosen
             sim.observe(ended, obs=obs, masks=masks)
         return VectorStep(res, final_obs, final_seeds)
+
+    def _require_reset(self, call: str) -> None:
+        """:class:`~cdr_bench.errors.ResetNeeded` unless every slot has been started."""
+        if not self._ready:
+            waiting = np.flatnonzero(~self._started)
+            raise ResetNeeded(
+                f"{call}() before reset(): call reset() first (slot(s) "
+                f"{short_repr(waiting.tolist())} of {self.num_envs} never started)"
+            )
 
     def _checked(self, actions: Any) -> NDArray[np.int64]:
         """``actions`` as the (E, M) int64 array the simulator steps, or an :class:`ActionError`
