@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench._data import BUILTIN_AGENTS, data_dir
+from cdr_bench.checks import file_kind
 from cdr_bench.errors import UserError
 
 _SKIP_DIRS = {"__pycache__", ".git", ".ipynb_checkpoints"}
@@ -44,6 +45,9 @@ def resolve_agent_path(path: str | os.PathLike[str]) -> Path:
         raise AgentError(
             f"agent file {path} not found (built-in agents: {', '.join(BUILTIN_AGENTS)})"
         )
+    kind = file_kind(p.stat().st_mode)
+    if kind is not None:  # a named pipe would block the hash, a device never ends
+        raise AgentError(f"agent file {path}: is {kind}, not a Python file")
     if p.suffix != ".py":
         raise AgentError(f"agent file {path}: expected a .py file or a folder with agent.py")
     return p.resolve()
@@ -69,15 +73,36 @@ CHECKPOINT_ENV = "CDR_BENCH_CHECKPOINT"
 scores its ablations this way); when set, the file it names is part of the identity."""
 
 
+MAX_AGENT_FILES = 1000
+"""Most files an agent's identity hashes (the largest shipped agent has fewer than 10)."""
+MAX_AGENT_ENTRIES = 20_000
+"""Most folder entries looked at while listing an agent's files."""
+MAX_AGENT_BYTES = 8 << 30
+"""Most bytes an agent's identity hashes (code, configuration and weights together)."""
+
+
+def _too_many(folder: Path, what: str) -> AgentError:
+    return AgentError(
+        f"agent folder {folder}: {what}; an agent.py is hashed with every file of its folder "
+        "(docs/agents.md, Identity): put it in a folder of its own"
+    )
+
+
 def _listing(folder: Path, suffixes: tuple[str, ...], recursive: bool) -> list[Path]:
-    out = []
+    out: list[Path] = []
+    seen = 0
     for root, dirs, names in os.walk(folder):
         dirs[:] = (
             sorted(d for d in dirs if d not in _SKIP_AGENT_DIRS and not d.startswith("."))
             if recursive
             else []
         )
+        seen += len(dirs) + len(names)
+        if seen > MAX_AGENT_ENTRIES:
+            raise _too_many(folder, f"more than {MAX_AGENT_ENTRIES} files and folders")
         out += [Path(root) / n for n in names if n.endswith(suffixes) and not n.startswith(".")]
+        if len(out) > MAX_AGENT_FILES:
+            raise _too_many(folder, f"more than {MAX_AGENT_FILES} files to hash")
     return out
 
 
@@ -107,8 +132,47 @@ def agent_files(
     return sorted(set(out))
 
 
+def reserved_module_names() -> frozenset[str]:
+    """Top-level module names an agent's file may not take: the standard library's, the
+    interpreter's built-in modules, every installed distribution's top-level packages, and
+    ``cdr_bench``. A file ``json.py`` or ``numpy.py`` in a folder on some process's import path
+    would replace the real module for whatever imports it there."""
+    from importlib import metadata
+
+    names = set(sys.stdlib_module_names) | set(sys.builtin_module_names) | {"cdr_bench"}
+    try:
+        names |= set(metadata.packages_distributions())
+    except Exception:  # noqa: BLE001 - a broken distribution's metadata: the rest still holds
+        pass
+    return frozenset(names)
+
+
+def check_module_names(agent: Path, files: list[Path], what: str) -> None:
+    """:class:`AgentError` naming the first code file among ``files`` (the files of the agent
+    ``agent``) whose top-level module name, as the agent's folder on the import path makes it,
+    would shadow a standard or installed module (:func:`reserved_module_names`): ``json.py``,
+    ``numpy.py``, ``cdr_bench.py``, or a folder ``numpy/`` holding code."""
+    reserved = reserved_module_names()
+    top = resolve_agent_path(agent).parent
+    for f in files:
+        f = f.resolve()
+        if f.suffix != ".py" or not f.is_relative_to(top):
+            continue
+        first = f.relative_to(top).parts[0]
+        name = first.removesuffix(".py")
+        if name in reserved:
+            raise AgentError(
+                f"{what}: agent file {f.relative_to(top)} would shadow the module `{name}` (a "
+                "standard or installed module); rename it"
+            )
+
+
 def file_sha256(p: Path) -> str:
-    """SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
+    """SHA-256 of a regular file's bytes (hex), read in 1 MiB chunks; anything else (a named
+    pipe, a device, a folder) is an :class:`AgentError`, never a read that blocks."""
+    kind = file_kind(p.stat().st_mode)
+    if kind is not None:
+        raise AgentError(f"{p}: is {kind}, not a file an agent may be made of")
     h = hashlib.sha256()
     with open(p, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -138,9 +202,11 @@ def agent_identity(path: str | os.PathLike[str], checkpoint: Any = _FROM_ENV) ->
         override = os.fspath(override)
         if not Path(override).is_file():
             raise AgentError(f"{CHECKPOINT_ENV}={override}: no such checkpoint file")
-    files = {
-        _name(p, base): file_sha256(p) for p in agent_files(path, override if override else None)
-    }
+    listed = agent_files(path, override if override else None)
+    total = sum(p.stat().st_size for p in listed)
+    if total > MAX_AGENT_BYTES:
+        raise _too_many(base, f"{total} bytes to hash, more than {MAX_AGENT_BYTES}")
+    files = {_name(p, base): file_sha256(p) for p in listed}
     lines = [f"{k} {v}" for k, v in sorted(files.items())]
     identity: dict[str, Any] = {
         "name": agent_name(path),
