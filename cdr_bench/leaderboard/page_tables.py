@@ -6,11 +6,17 @@ scenario, the entries, the paper's tables and "published vs measured here"; thei
 into the pages by :mod:`cdr_bench.leaderboard.render`. The number formats, cells and Markdown
 layout are those of :mod:`cdr_bench.evaluate.report` (the tables ``cdr-bench evaluate`` and
 ``report`` print), from the same column list.
+
+Text from a submission (display name, description, authors, reference, training command) enters
+a cell escaped as Markdown (:func:`~cdr_bench.leaderboard.text.md_text`, or a code span); the
+HTML page reads those escapes back (:func:`inline_md`), so the same cell is the literal text on
+both pages and never markup.
 """
 
 from __future__ import annotations
 
 import html
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -25,6 +31,7 @@ from cdr_bench.evaluate.report import (
     fmt_metric,
     fmt_value,
 )
+from cdr_bench.leaderboard.text import md_code, md_text
 
 MAIN_COLUMNS: Sequence[Column] = MAIN_METRICS
 """The columns of the leaderboard and of the documentation tables (the metrics that are not
@@ -51,16 +58,48 @@ def esc(s: str) -> str:
     return html.escape(s, quote=True)
 
 
+_MD_ESCAPE = re.compile(r"\\([!-/:-@\[-`{-~])|&(amp|lt|gt|quot|#[0-9]{1,7});")
+"""A Markdown backslash escape (of ASCII punctuation) or a character reference."""
+_PLACEHOLDER = 0xF0000
+"""Escaped characters wait as private-use characters (refused in submitted text) while the
+code spans and bold are found."""
+
+
 def inline_md(s: str) -> str:
-    """Escape, then render `code` and **bold** (the only inline Markdown the pages use)."""
-    parts = esc(s).split("`")
-    for i in range(1, len(parts), 2):
-        parts[i] = f"<code>{parts[i]}</code>"
+    """Markdown text as HTML: `code` and **bold** (the only inline Markdown the pages use),
+    backslash escapes and character references (:func:`~.text.md_text` writes them) as the
+    character they stand for; everything else escaped."""
+    kept: list[tuple[str, str]] = []  # (as written, the character)
+
+    def hold(m: re.Match[str]) -> str:
+        if m.group(1) is not None:
+            ch = m.group(1)
+        elif m.group(2).startswith("#"):
+            code = int(m.group(2)[1:])
+            if not 0 < code <= 0x10FFFF or 0xD800 <= code <= 0xDFFF:
+                return m.group(0)  # not a character: left as written (and escaped)
+            ch = chr(code)
+        else:
+            ch = {"amp": "&", "lt": "<", "gt": ">", "quot": '"'}[m.group(2)]
+        kept.append((m.group(0), ch))
+        return chr(_PLACEHOLDER + len(kept) - 1)
+
+    def back(text: str, literal: bool) -> str:
+        return "".join(
+            esc(kept[ord(c) - _PLACEHOLDER][0 if literal else 1])
+            if _PLACEHOLDER <= ord(c) < _PLACEHOLDER + len(kept)
+            else c
+            for c in text
+        )
+
+    parts = esc(_MD_ESCAPE.sub(hold, s)).split("`")
+    for i in range(len(parts)):
+        parts[i] = f"<code>{back(parts[i], True)}</code>" if i % 2 else parts[i]
     text = "".join(parts)
     bits = text.split("**")
     for i in range(1, len(bits), 2):
         bits[i] = f"<strong>{bits[i]}</strong>"
-    return "".join(bits)
+    return back("".join(bits), False)
 
 
 def html_table(
@@ -72,7 +111,7 @@ def html_table(
         '<div class="scroll">',
         f'<table id="{esc(tid)}" class="{esc(("sortable " + cls).strip())}">',
     ]
-    out.append("<thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr></thead>")
+    out.append("<thead><tr>" + "".join(f"<th>{inline_md(h)}</th>" for h in head) + "</tr></thead>")
     out.append("<tbody>")
     for i, r in enumerate(rows):
         tds = []
@@ -162,7 +201,7 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         rows.append(
             [
                 Cell(f"{r['rank']}{tied}", r["rank"]),
-                Cell(e["display_name"], e["display_name"]),
+                Cell(md_text(e["display_name"]), e["display_name"]),
                 Cell(e["group"], e["group"]),
                 Cell(fmt_metric("rate", h), h["value"], r["rank"] == 1),
                 Cell(fmt_diff("rate", r["vs_above"]), (r["vs_above"] or {}).get("diff")),
@@ -188,7 +227,7 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     sd = data["seeds"]
     ent = {e["name"]: e for e in data["entries"]}
     rank = {r["entry"]: r["rank"] for r in data["ranking"]["rows"]}
-    label = {c: ent[c]["display_name"] for c in sd["comparators"]}
+    label = {c: md_text(ent[c]["display_name"]) for c in sd["comparators"]}
     sc = sd["scenario"]
     head = [
         "#",
@@ -209,7 +248,7 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         per = " ".join(f"{100 * v:.1f}" for v in h["per_run"])
         row = [
             Cell(str(rank[r["entry"]]), rank[r["entry"]]),
-            Cell(ent[r["entry"]]["display_name"], ent[r["entry"]]["display_name"]),
+            Cell(md_text(ent[r["entry"]]["display_name"]), ent[r["entry"]]["display_name"]),
             Cell(str(h["runs"]), h["runs"]),
             Cell(per if h["runs"] > 1 else f"{per} (one run)", h["min"]),
             Cell(iv(h), h["iqm"]),
@@ -300,7 +339,7 @@ def tactical_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     rows: Rows = []
     groups = []
     for r in data["ranking"]["rows"]:
-        row = [Cell(str(r["rank"]), r["rank"]), Cell(ent[r["entry"]]["display_name"])]
+        row = [Cell(str(r["rank"]), r["rank"]), Cell(md_text(ent[r["entry"]]["display_name"]))]
         for t in tac:
             c = t["cells"].get(r["entry"])
             if c is None:
@@ -317,7 +356,8 @@ def tactical_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
 def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[str], Rows]:
     """One scenario, entries in ranking order; a fixed encounter (every episode the same
     start) without intervals."""
-    names = {e["name"]: e["display_name"] for e in data["entries"]}
+    raw = {e["name"]: e["display_name"] for e in data["entries"]}
+    names = {k: md_text(v) for k, v in raw.items()}
     ci = not table.get("fixed", False)
     head = ["#", "entry"] + [c.header for c in MAIN_COLUMNS] + [LATENCY_HEADER]
     rows = []
@@ -325,7 +365,7 @@ def scenario_table(data: dict[str, Any], table: dict[str, Any]) -> tuple[list[st
         ref = r["entry"] == data["reference"]
         row = [
             Cell(str(r["rank"]), r["rank"]),
-            Cell(names[r["entry"]] + (" (reference)" if ref else ""), names[r["entry"]]),
+            Cell(names[r["entry"]] + (" (reference)" if ref else ""), raw[r["entry"]]),
         ]
         for c in MAIN_COLUMNS:
             m = r["metrics"][c.key]
@@ -367,14 +407,14 @@ def entries_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         budget, seeds = fmt_budget(e.get("budget"))
         rows.append(
             [
-                Cell(e["display_name"], e["display_name"]),
+                Cell(md_text(e["display_name"]), e["display_name"]),
                 Cell(e.get("group", "-")),
-                Cell(e["description"]),
-                Cell(f"`{e['agent']}`"),
-                Cell(f"`{e['checkpoint']}`" if e["checkpoint"] else "-"),
-                Cell(", ".join(e["authors"])),
-                Cell(e["reference"]),
-                Cell(f"`{e['training']}`" if e["training"] else "scripted (no training)"),
+                Cell(md_text(e["description"])),
+                Cell(md_code(e["agent"])),
+                Cell(md_code(e["checkpoint"]) if e["checkpoint"] else "-"),
+                Cell(md_text(", ".join(e["authors"]))),
+                Cell(md_text(e["reference"])),
+                Cell(md_code(e["training"]) if e["training"] else "scripted (no training)"),
                 Cell(budget),
                 Cell(seeds),
                 Cell(f"`{e['agent_sha256'][:12]}`"),
@@ -397,7 +437,8 @@ def published_table(
 
 
 def side_by_side_tables(data: dict[str, Any]) -> list[tuple[str, list[str], Rows]]:
-    names = {e["name"]: e["display_name"] for e in data["entries"]}
+    """Published vs measured, per entry and paper row: (Markdown title, header, rows)."""
+    names = {e["name"]: md_text(e["display_name"]) for e in data["entries"]}
     kinds = _kinds()
     by_entry: dict[tuple[str, str], list[dict[str, Any]]] = {}  # (entry, paper row): blocks
     for block in data["published_vs_measured"]:

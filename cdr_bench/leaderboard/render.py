@@ -14,9 +14,9 @@ It has no external assets: CSS, scripts and data are inline, the plots are data 
 
 from __future__ import annotations
 
-import base64
 import json
 from typing import Any
+from urllib.parse import quote
 
 from cdr_bench.evaluate.report import COLUMNS, Rows, fmt_metric, fmt_value, md_table
 from cdr_bench.leaderboard.page_tables import (
@@ -36,6 +36,7 @@ from cdr_bench.leaderboard.page_tables import (
     tactical_table,
 )
 from cdr_bench.leaderboard.published import Published
+from cdr_bench.leaderboard.text import md_text
 
 GENERATOR = "cdr-bench leaderboard build"
 
@@ -144,7 +145,8 @@ def _anchor(sid: str) -> str:
 
 
 def _names(data: dict[str, Any]) -> dict[str, str]:
-    return {e["name"]: e["display_name"] for e in data["entries"]}
+    """Display names escaped as Markdown text (the HTML page reads them with ``inline_md``)."""
+    return {e["name"]: md_text(e["display_name"]) for e in data["entries"]}
 
 
 def _pct(m: dict[str, Any]) -> str:
@@ -617,7 +619,7 @@ def _replay_html(data: dict[str, Any], replays: dict[str, dict[str, Any]]) -> li
         for n in who:
             b.append(
                 f'<figure data-group="{esc(group[n])}"><canvas width="320" height="320" '
-                f'data-entry="{esc(n)}"></canvas><figcaption><strong>{esc(names[n])}</strong>'
+                f'data-entry="{esc(n)}"></canvas><figcaption><strong>{inline_md(names[n])}</strong>'
                 ' <span class="outcome"></span></figcaption></figure>'
             )
         b += ["</div></div>"]
@@ -714,11 +716,10 @@ def render_html(
             html_table("table-" + _anchor(t["scenario"]), head, rows, groups=_groups_of(data, t)),
         ]
     b.append('<h2 id="plots">Plots</h2>')
-    for name, png in plots.items():
-        uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+    for name in plots:  # written beside the page, as plots/NAME (linked, not embedded)
         b.append(
-            f'<figure><img alt="{esc(name)}" src="{uri}"><figcaption>{esc(name)}'
-            "</figcaption></figure>"
+            f'<figure><img alt="{esc(name)}" src="plots/{quote(name)}" loading="lazy">'
+            f"<figcaption>{esc(name)}</figcaption></figure>"
         )
     head, rows, groups = entries_table(data)
     b += ['<h2 id="entries">Entries</h2>', html_table("table-entries", head, rows, groups=groups)]
@@ -742,6 +743,6 @@ def render_html(
     if not sbs:
         b.append("<p>No entry names a published row yet.</p>")
     for i, (title, head, rows) in enumerate(sbs):
-        b += [f"<h3>{esc(title)}</h3>", html_table(f"table-side-{i}", head, rows)]
+        b += [f"<h3>{inline_md(title)}</h3>", html_table(f"table-side-{i}", head, rows)]
     b += ["</section>", f"<script>{_JS}</script>", "</body></html>", ""]
     return "\n".join(b)

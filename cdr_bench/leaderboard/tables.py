@@ -50,6 +50,7 @@ from cdr_bench.leaderboard.page_tables import (
 )
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published, load_published
 from cdr_bench.leaderboard.submission import Submission, load_submissions
+from cdr_bench.leaderboard.text import md_text
 
 
 def result_path(results_dir: Path, name: str) -> Path:
@@ -139,7 +140,8 @@ class Repo:
         return self.submissions[name]
 
     def label(self, name: str) -> str:
-        return str(self.submission(name).display_name)
+        """The entry's display name as Markdown text (the blocks are Markdown tables)."""
+        return md_text(self.submission(name).display_name)
 
     def result(self, name: str) -> dict[str, Any]:
         if name not in self._results:

@@ -47,7 +47,8 @@ def text_problems(value: str, *, limit: int, name: bool = False) -> list[str]:
     """What is wrong with a one-line free-text value (empty when nothing): longer than
     ``limit``, more than one line, a control or invisible character, a script URL
     (``javascript:``, ``vbscript:``, ``data:``); with ``name``, any character other than
-    letters, digits and :data:`NAME_PUNCTUATION`."""
+    letters, digits and :data:`NAME_PUNCTUATION`, or a first character other than a letter or
+    a digit."""
     out = []
     if len(value) > limit:
         out.append(f"expected at most {limit} characters, got {len(value)}")
@@ -68,6 +69,8 @@ def text_problems(value: str, *, limit: int, name: bool = False) -> list[str]:
                 f"a name holds letters, digits, spaces and {NAME_PUNCTUATION.strip()} only; "
                 f"got {shown}"
             )
+        elif value and not value[0].isalnum():
+            out.append(f"a name starts with a letter or a digit, got {short_repr(value[0])}")
     m = _SCRIPT_URL.search(value)
     if m:
         out.append(f"a script URL ({short_repr(m.group(0))}) is not allowed")
