@@ -84,42 +84,44 @@ def validate_actions(out: Any, n: int) -> tuple[NDArray[np.int64] | None, int, s
     return arr.astype(np.int64, copy=False), -1, ""
 
 
-_NUMBA_CACHE_GLOBALS = {
-    ("builtins", "object"),
-    ("copyreg", "_reconstructor"),
-    ("numpy", "ndarray"),
-    ("numpy", "dtype"),
-    ("numpy.core.multiarray", "_reconstruct"),
-    ("numpy._core.multiarray", "_reconstruct"),
-    ("numba.core.funcdesc", "PythonFunctionDescriptor"),
-    ("numba.core.environment", "_rebuild_env"),
-    ("numba.core.typing.templates", "Signature"),
-    ("numba.core.types.abstract", "_type_reconstructor"),
-}
-_NUMBA_TYPE_MODULES = {
-    "numba.core.types.scalars",
-    "numba.core.types.npytypes",
-    "numba.core.types.containers",
-    "numba.core.types.misc",
-    "numba.core.types.functions",
-    "numba.core.types.iterators",
-}
+_PICKLE_MODULES = ("numba", "numpy", "llvmlite")
+"""Packages whose globals numba's own compilation cache stores (types, signatures, arrays,
+environments): the audit hook lets an unpickler look up globals of these, by plain name."""
+_PICKLE_GLOBALS = {("builtins", "object"), ("copyreg", "_reconstructor")}
 
 
 def _refuse_unpickling(event: str, args: tuple[Any, ...]) -> None:
-    """Audit hook of a confined agent process: every global an unpickler looks up must be one
-    of the few that numba's own compilation cache stores (types, signatures, arrays);
-    anything else (``os.system``, ``builtins.eval``, a class of the agent) is refused, however
-    the unpickler was reached."""
+    """Audit hook of a confined agent process, a convenience and not a boundary (a
+    pure-Python unpickler never raises the event; the sandbox is the boundary): a global an
+    unpickler looks up must be a plain name in numba's, numpy's or llvmlite's modules (what
+    numba's cache of compiled kernels stores), or ``object`` and ``copyreg._reconstructor``;
+    anything else (``os.system``, ``builtins.eval``, a class of the agent) is refused with a
+    message that says how to load weights without pickle."""
     if event != "pickle.find_class":
         return
     module, name = str(args[0]), str(args[1])
-    if (module, name) in _NUMBA_CACHE_GLOBALS or module in _NUMBA_TYPE_MODULES:
+    if (module, name) in _PICKLE_GLOBALS:
+        return
+    if "." not in name and module.split(".", 1)[0] in _PICKLE_MODULES:
         return
     raise RuntimeError(
         f"refused: unpickling {module[:60]}.{name[:60]} (pickle can run arbitrary code; load "
         "weights with torch.load(weights_only=True), safetensors or numpy without pickle)"
     )
+
+
+def _seed_numba_cache() -> None:
+    """Copy the read-only seed of numba's cache (``CDR_BENCH_NUMBA_SEED``, see
+    :func:`cdr_bench.evaluate.sandbox.seed_numba_cache`) into the writable ``NUMBA_CACHE_DIR``
+    before the agent is imported."""
+    import shutil
+
+    seed, cache = os.environ.get("CDR_BENCH_NUMBA_SEED"), os.environ.get("NUMBA_CACHE_DIR")
+    if seed and cache and os.path.isdir(seed):
+        try:
+            shutil.copytree(seed, cache, dirs_exist_ok=True)
+        except OSError:
+            pass  # only costs compilation time
 
 
 class Host:
@@ -258,6 +260,7 @@ def main() -> int:
     os.dup2(devnull, 0)
     sys.stdout = sys.stderr
     if os.environ.get("CDR_BENCH_CONFINED") == "1":
+        _seed_numba_cache()
         sys.addaudithook(_refuse_unpickling)
     Host(rfile, wfile).serve(sys.argv[1])
     return 0

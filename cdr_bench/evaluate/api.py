@@ -354,8 +354,15 @@ def _run_tasks(
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
+    from cdr_bench.evaluate.sandbox import die_with_parent
+
     ctx = multiprocessing.get_context("spawn")
-    ex = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx)
+    ex = ProcessPoolExecutor(
+        max_workers=min(workers, len(tasks)),
+        mp_context=ctx,
+        initializer=die_with_parent,  # a worker (and its agent) dies with this process
+        initargs=(os.getpid(),),
+    )
     try:
         pending = {ex.submit(run_batch_task, *t) for t in tasks}
         while pending:

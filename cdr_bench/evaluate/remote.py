@@ -33,9 +33,8 @@ import signal
 import struct
 import subprocess
 import sys
-import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,14 +42,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS
-from cdr_bench.evaluate.loader import CHECKPOINT_ENV, AgentError, agent_name, resolve_agent_path
+from cdr_bench.evaluate.loader import (
+    CHECKPOINT_ENV,
+    AgentError,
+    agent_files,
+    agent_name,
+    resolve_agent_path,
+)
 from cdr_bench.evaluate.sandbox import (
+    Confined,
     Confinement,
     Limits,
+    child_setup,
     clean,
-    confined_argv,
+    confined,
+    make_scratch,
+    nproc_limit,
     seed_numba_cache,
-    set_limits,
     tail,
 )
 
@@ -106,19 +114,28 @@ class AgentProcess:
         self.log: Path | None = None
         self._scratch: Path | None = None
         self._handles: dict[tuple[int, bytes], RemoteAgent] = {}
-        argv = [sys.executable, "-m", "cdr_bench.evaluate.agent_host", str(self.path)]
-        env: dict[str, str] | None = None
+        # -P: no folder of the caller (the current folder, a json.py there) on the import path
+        argv = [sys.executable, "-P", "-m", "cdr_bench.evaluate.agent_host", str(self.path)]
+        self._scratch = make_scratch()
+        env: dict[str, str] = {**os.environ, "TMPDIR": str(self._scratch)}
         stderr: Any = None  # plain evaluate: the agent's output goes to the terminal
+        box: Confined | None = None
+        nproc = None
         if options.confinement is not None:
-            self._scratch = Path(tempfile.mkdtemp(prefix="cdr-bench-agent-"))
             self.log = self._scratch / "agent-output.log"
-            seed_numba_cache(self._scratch / "numba-cache")
-            extra = (
-                {CHECKPOINT_ENV: os.environ[CHECKPOINT_ENV]} if CHECKPOINT_ENV in os.environ else {}
-            )
-            argv, env = confined_argv(argv, options.confinement, self._scratch, extra)
+            seed = self._scratch / "numba-seed"
+            seed_numba_cache(seed)
+            ck = os.environ.get(CHECKPOINT_ENV)
+            extra = {CHECKPOINT_ENV: ck} if ck else {}
+            files = [str(f) for f in agent_files(self.path, ck or None)]
+            files += [ck] if ck else []
+            conf = replace(options.confinement, files=tuple(files))
+            home = self._scratch / "home"  # a size-capped tmpfs in the sandbox
+            home.mkdir()
+            box = confined(argv, conf, home, extra, numba_seed=seed)
+            argv, env = box.argv, box.env
             stderr = open(self.log, "wb")  # noqa: SIM115 - closed right after the start
-        limits = options.limits
+            nproc = nproc_limit()
         try:
             self.proc = subprocess.Popen(
                 argv,
@@ -127,7 +144,8 @@ class AgentProcess:
                 stderr=stderr,
                 env=env,
                 start_new_session=True,
-                preexec_fn=(lambda: set_limits(limits)) if limits is not None else None,
+                pass_fds=box.pass_fds if box is not None else (),
+                preexec_fn=child_setup(options.limits, nproc),
             )
         except OSError as e:
             self._cleanup()
@@ -135,6 +153,8 @@ class AgentProcess:
         finally:
             if stderr is not None:
                 stderr.close()
+            if box is not None:
+                box.close()
         assert self.proc.stdin is not None and self.proc.stdout is not None
         self._w, self._r = self.proc.stdin.fileno(), self.proc.stdout.fileno()
         os.set_blocking(self._w, False)

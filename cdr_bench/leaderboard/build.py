@@ -58,17 +58,18 @@ from typing import Any
 
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.analysis import DEFAULT_EPISODES, DEFAULT_SAMPLES
-from cdr_bench.evaluate.loader import agent_files
+from cdr_bench.evaluate.loader import agent_files, check_module_names, resolve_agent_path
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
 from cdr_bench.evaluate.sandbox import (
     Confinement,
     Limits,
     SandboxError,
+    child_setup,
     clean,
-    confined_argv,
+    confined,
     isolation,
-    set_limits,
+    remove_stale_scratch,
     tail,
 )
 from cdr_bench.leaderboard.data import (
@@ -100,7 +101,6 @@ REPLAY_EPISODES = 3
 """Episodes recorded per replayed scenario (the first ones of the evaluation)."""
 PAGES = ("README.md", "index.html", "leaderboard.json")
 _MPL_META = re.compile(r'<meta name="generator" content="[^"]*; plots: matplotlib ([^"]+)">')
-_DATA_URI = re.compile(r'src="data:image/png;base64,[A-Za-z0-9+/=]+"')
 
 
 def log(msg: str) -> None:
@@ -190,10 +190,13 @@ def run_child(
     wall_s: float,
     env: dict[str, str] | None = None,
     limits: Limits | None = None,
+    pass_fds: tuple[int, ...] = (),
 ) -> float:
     """Run ``argv`` in its own session with a wall-clock limit (then its whole process group is
-    killed); returns the wall time. :class:`SandboxError` naming ``what`` when it fails, with
-    its last output (control characters removed)."""
+    killed); returns the wall time. The child gets ``SIGKILL`` when this process dies
+    (:func:`~cdr_bench.evaluate.sandbox.child_setup`), ``kill -9`` included, and passes that
+    on to what it starts. :class:`SandboxError` naming ``what`` when it fails, with its last
+    output (control characters removed)."""
     import signal
     import subprocess
 
@@ -209,7 +212,8 @@ def run_child(
             stdout=out,
             stderr=err,
             start_new_session=True,
-            preexec_fn=(lambda: set_limits(limits)) if limits is not None else None,
+            pass_fds=pass_fds,
+            preexec_fn=child_setup(limits),
         )
         try:
             code = proc.wait(timeout=wall_s)
@@ -268,8 +272,15 @@ def evaluate_submission(
     agent = _inside(root, sub.agent, what, "agent")
     if agent.is_relative_to(lb_dir):
         raise SandboxError(f"{what}: agent {sub.agent} lies inside the leaderboard folder")
-    for f in agent_files(agent, root / sub.checkpoint if sub.checkpoint else None):
+    if resolve_agent_path(agent).parent == root.resolve():
+        raise SandboxError(
+            f"{what}: agent {sub.agent} lies at the repository root; put it in a folder of its "
+            "own (agents/<name>/agent.py)"
+        )
+    files = agent_files(agent, root / sub.checkpoint if sub.checkpoint else None)
+    for f in files:
         _inside(root, str(f), what, "agent file")
+    check_module_names(agent, files, what)
     env = dict(os.environ)
     env.pop("CDR_BENCH_CHECKPOINT", None)
     py = sys.executable
@@ -277,21 +288,26 @@ def evaluate_submission(
     if sub.checkpoint:
         _inside(root, sub.checkpoint, what, "checkpoint")
         env["CDR_BENCH_CHECKPOINT"] = sub.checkpoint
-        conf = Confinement(view=str(root), hidden=(str(lb_dir),), limits=limits)
+        ck_file = str((root / sub.checkpoint).resolve())
+        conf = Confinement(view=str(root), files=(ck_file,), limits=limits)
         box = scratch / "safeload"
         box.mkdir(parents=True, exist_ok=True)
-        argv, box_env = confined_argv(
-            [py, "-m", "cdr_bench.leaderboard.safeload", sub.checkpoint], conf, box
+        safe = confined(
+            [py, "-I", "-m", "cdr_bench.leaderboard.safeload", sub.checkpoint], conf, box
         )
-        wall += run_child(
-            argv,
-            what=f"{what}: checkpoint {sub.checkpoint}",
-            cwd=root,
-            log_dir=scratch / "safeload-log",
-            wall_s=limits.wall_s,
-            env=box_env,
-            limits=limits,
-        )
+        try:
+            wall += run_child(
+                safe.argv,
+                what=f"{what}: checkpoint {sub.checkpoint}",
+                cwd=root,
+                log_dir=scratch / "safeload-log",
+                wall_s=limits.wall_s,
+                env=safe.env,
+                limits=limits,
+                pass_fds=safe.pass_fds,
+            )
+        finally:
+            safe.close()
     out = result_path(out_dir, sub.name)
     mm = [
         {
@@ -325,8 +341,10 @@ def evaluate_submission(
     spec_file = scratch / "spec.json"
     spec_file.parent.mkdir(parents=True, exist_ok=True)
     spec_file.write_text(json.dumps(spec, indent=1), encoding="utf-8")
+    # -I: isolated mode, nothing of the working directory (the repository root: relative paths
+    # in the spec and in the result are relative to it) or of PYTHON* variables on the path
     wall += run_child(
-        [py, "-m", "cdr_bench.leaderboard.entry", str(spec_file.resolve())],
+        [py, "-I", "-m", "cdr_bench.leaderboard.entry", str(spec_file.resolve())],
         what=what,
         cwd=root,
         log_dir=scratch / "entry-log",
@@ -468,8 +486,11 @@ def _evaluate_all(
 
 @contextmanager
 def staging(lb_dir: Path) -> Iterator[Path]:
+    """A fresh staging folder ``.build-<pid>-*`` in ``lb_dir``, removed afterwards; those a
+    build killed with ``kill -9`` left (their process is gone) are removed first."""
     lb_dir.mkdir(parents=True, exist_ok=True)
-    d = Path(tempfile.mkdtemp(prefix=".build-", dir=lb_dir))
+    remove_stale_scratch(lb_dir, ".build-")
+    d = Path(tempfile.mkdtemp(prefix=f".build-{os.getpid()}-", dir=lb_dir))
     try:
         yield d
     finally:
@@ -563,11 +584,8 @@ def compare_pages(lb_dir: Path, files: dict[str, bytes], notes: list[str]) -> li
             continue
         old_t, new_t = old.decode("utf-8", errors="replace"), new.decode()
         if rel == "index.html":
-            old_s = _MPL_META.sub("", _DATA_URI.sub('src="data:image/png..."', old_t))
-            new_s = _MPL_META.sub("", _DATA_URI.sub('src="data:image/png..."', new_t))
-            if old_s == new_s:
-                if same_mpl:
-                    diffs.append("index.html: an embedded plot differs")
+            old_s, new_s = _MPL_META.sub("", old_t), _MPL_META.sub("", new_t)
+            if old_s == new_s:  # only the matplotlib version it names differs
                 continue
             old_t, new_t = old_s, new_s
         diffs.append(_diff_text(rel, old_t, new_t))
