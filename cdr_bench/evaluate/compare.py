@@ -156,6 +156,7 @@ def compare(
             na, nb = _sums(xa, role, names), _sums(xb, role, names)
             for name in names:
                 va, vb = float(_ratio(na[name])), float(_ratio(nb[name]))
+                undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
                 diffs = _ratio(nb[name], idx) - _ratio(na[name], idx)
                 diffs = diffs[np.isfinite(diffs)]
                 lo, hi = (
@@ -173,8 +174,10 @@ def compare(
                         "diff": vb - va,
                         "ci95": [lo, hi],
                         "significant": bool(lo > 0 or hi < 0),
+                        **({"undefined": undefined} if undefined else {}),
                     }
                 )
+    notes += _undefined_notes(rows)
     return {
         "a": {"path": str(path_a), "agent": a["agent"]["name"]},
         "b": {"path": str(path_b), "agent": b["agent"]["name"]},
@@ -184,6 +187,40 @@ def compare(
     }
 
 
+def _why_undefined(key: str) -> str:
+    """Why ``key`` has no value for a group of episodes: its denominator is zero."""
+    m = next((m for m in METRICS if m.key == key), None)
+    if m is None:
+        return "no episode it counts"
+    what = {
+        "rate": "no trial to count it over",
+        "mean": "no episode it is averaged over",
+        "per_h": "no flight time to count it over",
+    }.get(m.aggregate, "no episode it counts")
+    return f"{what} ({m.doc.rstrip('.')})" if m.doc else what
+
+
+def _undefined_notes(rows: list[dict[str, Any]]) -> list[str]:
+    """One note per metric and side that has no value somewhere, naming where and why: the
+    table shows ``n/a`` there, and the difference and its interval are undefined too."""
+    where: dict[tuple[str, str], list[str]] = {}
+    for r in rows:
+        for side in r.get("undefined", []):
+            where.setdefault((r["metric"], side), []).append(f"{r['scenario']}/{r['aircraft']}")
+    notes = []
+    for (key, side), places in where.items():
+        shown = ", ".join(places[:4]) + (f" and {len(places) - 4} more" if len(places) > 4 else "")
+        notes.append(
+            f"{key} cannot be computed for {side} on {shown}: {_why_undefined(key)}; shown as "
+            "n/a, with no difference"
+        )
+    return notes
+
+
+def _fmt(spec: str, x: float) -> str:
+    return "n/a" if x != x else spec.format(x)
+
+
 def comparison_table(cmp: dict[str, Any]) -> str:
     a, b = cmp["a"]["agent"], cmp["b"]["agent"]
     head = ["scenario", "aircraft", "metric", f"A={a}", f"B={b}", "B-A", "95% paired CI", ""]
@@ -191,18 +228,18 @@ def comparison_table(cmp: dict[str, Any]) -> str:
     kinds = {m.key: m.kind for m in METRICS}
     for r in cmp["rows"]:
         pct = kinds.get(r["metric"], "") == "rate"
-        f = (lambda x: f"{100 * x:.1f}%") if pct else (lambda x: f"{x:.3f}")
-        g = (lambda x: f"{100 * x:+.1f}") if pct else (lambda x: f"{x:+.3f}")
+        vf, df = ("{:.1f}%", "{:+.1f}") if pct else ("{:.3f}", "{:+.3f}")
+        scale = 100 if pct else 1
         lo, hi = r["ci95"]
         rows.append(
             [
                 r["scenario"],
                 r["aircraft"],
                 r["metric"],
-                f(r["a"]),
-                f(r["b"]),
-                g(r["diff"]),
-                f"[{g(lo)}, {g(hi)}]",
+                _fmt(vf, scale * r["a"]),
+                _fmt(vf, scale * r["b"]),
+                _fmt(df, scale * r["diff"]),
+                f"[{_fmt(df, scale * lo)}, {_fmt(df, scale * hi)}]",
                 "*" if r["significant"] else "",
             ]
         )
