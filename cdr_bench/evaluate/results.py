@@ -374,6 +374,13 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
         )
     if not isinstance(data.get("scenarios"), list):
         raise ValueError(f"{p}: scenarios: expected a list")
+    stored = [s.get("id") for s in data["scenarios"] if isinstance(s, dict) and "metrics" in s]
+    if stored and not legacy:  # schema 3 stored them; they are recomputed below all the same
+        raise ValueError(
+            f"{p}: scenario {str(stored[0])[:60]} carries stored metrics, which a result of "
+            f"schema {SCHEMA_VERSION} never holds (they are computed from the per-episode log "
+            "when read): an edited file; re-run the evaluation"
+        )
     eps = _parse_episodes(ep, text, digest)
     return add_metrics(data, eps) if metrics else data
 
