@@ -37,15 +37,23 @@ not match, e.g. a new log beside an old JSON after a disk filled up between the 
 
 ``<out>.partial.jsonl`` (only while a run is unfinished): a header line with the ``run_key``,
 then one line per finished batch (appended and fsync'ed); a torn last line is ignored. Every
-batch line carries a digest of its content and the run key, and ``--resume`` validates each line
-(digest, scenario, batch index, episode numbers and seeds): an edited or foreign line is an
-error, never merged.
+batch line carries a MAC (HMAC-SHA256 over the run key and the batch's content) keyed by a
+random per-run secret that is not in the file: :func:`resume_key_path`, a 0600 file in the
+user's cache folder (``$XDG_CACHE_HOME/cdr-bench/resume-keys``, else
+``~/.cache/cdr-bench/resume-keys``, a 0700 folder), named after the checkpoint's absolute path,
+written when the run starts and removed when it finishes. ``--resume`` validates each line (MAC,
+scenario, batch index, episode numbers and seeds): an edited, forged or foreign line is an
+error, never merged. So only a process that can read the user's cache folder can forge a line:
+a confined agent cannot (the sandbox shows no home folder); an agent run without
+``--sandbox`` runs as the user and can. A checkpoint moved to another path, user or machine
+cannot be resumed (its key is not there): run again without ``--resume``.
 """
 
 from __future__ import annotations
 
 import gzip
 import hashlib
+import hmac
 import io
 import json
 import os
@@ -173,25 +181,63 @@ def jsonl_text(rows: Iterable[dict[str, Any]]) -> str:
     return "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
 
 
-def batch_digest(run_key: str, batch: dict[str, Any]) -> str:
-    """The digest a partial-log line carries: SHA-256 of the run key and the batch's content."""
-    body = {k: v for k, v in batch.items() if k not in ("kind", "digest")}
-    return sha256_text(run_key + "\n" + canonical(body))
+def resume_key_path(partial: Path) -> Path:
+    """Where the secret key of the checkpoint ``partial`` lives (module docstring)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    name = hashlib.sha256(str(partial.resolve()).encode()).hexdigest()[:40]
+    return Path(base) / "cdr-bench" / "resume-keys" / f"{name}.key"
+
+
+def batch_mac(key: bytes, run_key: str, batch: dict[str, Any]) -> str:
+    """The MAC a partial-log line carries: HMAC-SHA256, keyed by the run's secret ``key``, of the
+    run key and the batch's content."""
+    body = {k: v for k, v in batch.items() if k not in ("kind", "mac", "digest")}
+    return hmac.new(key, (run_key + "\n" + canonical(body)).encode(), hashlib.sha256).hexdigest()
 
 
 class PartialLog:
-    """The append-only checkpoint of an unfinished run."""
+    """The append-only checkpoint of an unfinished run (module docstring: the MAC and its key)."""
 
     def __init__(self, path: Path, run_key: str):
         self.path = path
         self.run_key = run_key
+        self._key: bytes | None = None
+
+    def _new_key(self) -> None:
+        kp = resume_key_path(self.path)
+        try:
+            kp.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+            os.chmod(kp.parent, 0o700)
+            key = os.urandom(32)
+            tmp = kp.with_name(f".{kp.name}.{os.getpid()}.tmp")
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
+            with os.fdopen(fd, "wb") as f:
+                f.write(key)
+            os.replace(tmp, kp)
+        except OSError as e:
+            raise UserError(f"{kp}: cannot write the checkpoint's key ({e})") from None
+        self._key = key
+
+    def _load_key(self) -> bytes:
+        kp = resume_key_path(self.path)
+        try:
+            key = kp.read_bytes()
+        except OSError:
+            key = b""
+        if len(key) != 32:
+            raise ValueError(
+                f"{self.path}: its key {kp} is missing (the checkpoint was written by another "
+                "user, on another machine or at another path, or forged); delete it or run "
+                "without --resume"
+            )
+        return key
 
     def load(
         self, check: Callable[[dict[str, Any]], str | None] | None = None
     ) -> dict[tuple[str, int], dict[str, Any]]:
         """Finished batches keyed by (scenario id, batch index). Raises ``ValueError`` if the
-        file belongs to another run, is not a partial log, or holds a line that is not a batch
-        this run wrote (bad digest, or ``check(batch)`` returns a reason)."""
+        file belongs to another run, is not a partial log, has no key, or holds a line that
+        is not a batch this run wrote (bad MAC, or ``check(batch)`` returns a reason)."""
         done: dict[tuple[str, int], dict[str, Any]] = {}
         if not self.path.exists():
             return done
@@ -204,6 +250,7 @@ class PartialLog:
                 lines = f.read().decode("utf-8").split("\n")
         except (OSError, UnicodeDecodeError) as e:
             raise ValueError(f"{self.path}: unreadable checkpoint ({e}); delete it") from None
+        key = self._load_key()
         good_bytes = 0
         for i, line in enumerate(lines):
             if not line:
@@ -228,10 +275,14 @@ class PartialLog:
                 where = f"{self.path}:{i + 1}"
                 if not isinstance(row, dict) or row.get("kind") != "batch":
                     raise ValueError(f"{where}: not a batch line of this run; delete the file")
-                if row.get("digest") != batch_digest(self.run_key, row):
+                mac = row.get("mac")
+                if not isinstance(mac, str) or not hmac.compare_digest(
+                    mac, batch_mac(key, self.run_key, row)
+                ):
                     raise ValueError(
-                        f"{where}: the batch line was changed after it was written (its digest "
-                        "does not match); delete the file and run again"
+                        f"{where}: the batch line was changed after it was written, or not "
+                        "written by this run (its MAC does not match); delete the file and run "
+                        "again"
                     )
                 why = check(row) if check is not None else None
                 if why:
@@ -240,13 +291,18 @@ class PartialLog:
             good_bytes += len(line.encode()) + 1
         with open(self.path, "r+b") as f:  # drop a torn tail so appends start on a new line
             f.truncate(good_bytes)
+        self._key = key
         return done
 
     def start(self, header: dict[str, Any]) -> None:
+        """Begin a new checkpoint, with a new key."""
+        self._new_key()
         atomic_write_text(self.path, json.dumps({"kind": "header", **header}) + "\n")
 
     def append(self, batch: dict[str, Any]) -> None:
-        row = {"kind": "batch", **batch, "digest": batch_digest(self.run_key, batch)}
+        if self._key is None:
+            self._key = self._load_key()
+        row = {"kind": "batch", **batch, "mac": batch_mac(self._key, self.run_key, batch)}
         line = json.dumps(row, separators=(",", ":")) + "\n"
         with open(self.path, "a", encoding="utf-8") as f:
             f.write(line)
@@ -255,6 +311,7 @@ class PartialLog:
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+        resume_key_path(self.path).unlink(missing_ok=True)
 
 
 def strip_metrics(result: dict[str, Any]) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from cdr_bench.cli import main
-from cdr_bench.evaluate.results import read_result
+from cdr_bench.evaluate.results import read_result, resume_key_path
 
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS = ROOT / "agents"
@@ -392,16 +392,18 @@ def killed_checkpoint(tmp_path_factory):
     agent = write_agent(tmp, STALLING)
     out = tmp / "r.json"
     killed_after(agent, out, 2, tmp)
-    return agent, out.with_suffix(".partial.jsonl").read_text().splitlines()
+    partial = out.with_suffix(".partial.jsonl")
+    return agent, partial.read_text().splitlines(), resume_key_path(partial).read_bytes()
 
 
 @pytest.mark.parametrize("kind", ["directory", "bare_batch", "edited", "binary"])
 def test_resume_refuses_a_bad_checkpoint(cdr, tmp_path, killed_checkpoint, kind):
-    agent, lines = killed_checkpoint
+    agent, lines, key = killed_checkpoint
     lines = list(lines)
     out = tmp_path / "r.json"
     partial = out.with_suffix(".partial.jsonl")
     partial.write_text("\n".join(lines) + "\n")
+    resume_key_path(partial).write_bytes(key)  # the run's secret, as if it had run here
     if kind == "directory":
         partial.unlink()
         partial.mkdir()
@@ -502,9 +504,10 @@ def test_compare_on_the_scenarios_both_results_hold(cdr, tmp_path):
 @pytest.mark.parametrize(
     ("flag", "value", "words"),
     [
-        ("--batch-size", "0", "--batch-size must be >= 1, got 0"),  # was silently the default
-        ("--workers", "0", "--workers must be >= 1, got 0"),
-        ("--episodes", "-1", "--episodes must be >= 1, got -1"),
+        # --batch-size 0 was silently the default
+        ("--batch-size", "0", "argument --batch-size: expected a value in [1, 10000], got 0"),
+        ("--workers", "0", "argument --workers: expected a value in [1, 512], got 0"),
+        ("--episodes", "-1", "argument --episodes: expected a value in [1, 100000], got -1"),
     ],
 )
 def test_counts_below_one_are_refused(cdr, tmp_path, flag, value, words):
