@@ -6,7 +6,15 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
 from cdr_bench.evaluate.sandbox import Limits
+
+MAX_CPU_S = 30 * 86400
+"""Largest ``--cpu-limit`` (CPU seconds per process): 30 days."""
+MAX_MEMORY_MB = 4 << 20
+"""Largest ``--memory-limit`` (MiB of address space per process): 4 TiB."""
+MAX_WALL_S = 7 * 86400.0
+"""Largest ``--timeout`` (wall-clock seconds per submission run): 7 days."""
 
 
 def register(sub: Any) -> None:
@@ -40,7 +48,7 @@ def register(sub: Any) -> None:
     )
     b.add_argument(
         "--episodes",
-        type=int,
+        type=ranged(int, 1, MAX_EPISODES),
         default=None,
         help="episodes per scenario (--evaluate: 1000 = the paper's; named submissions: the "
         "committed count; --check: the committed count, or a smaller multiple of 200 to check "
@@ -54,14 +62,14 @@ def register(sub: Any) -> None:
     )
     b.add_argument(
         "--sample-seed",
-        type=int,
+        type=ranged(int, 0, MAX_SEED),
         default=None,
         help="--check: seed of the agent re-run sample (default: drawn at random and printed, "
         "so a check can be repeated exactly)",
     )
     b.add_argument(
         "--rerun-batches",
-        type=int,
+        type=ranged(int, 1, 30),
         default=1,
         help="--check: batches of 200 committed episodes per run on which the agent is asked "
         "again, the first drawn among the headline scenario's (1)",
@@ -74,19 +82,28 @@ def register(sub: Any) -> None:
         "which each entry's agent flies and must match its committed score (Fisher's exact "
         "test, p < 1e-4 fails; 0: no such test) (200)",
     )
-    b.add_argument("--workers", type=int, default=2, help="evaluation processes (2)")
-    b.add_argument("--cpu-limit", type=int, default=defaults.cpu_s, help="CPU seconds per process")
+    b.add_argument(
+        "--workers", type=ranged(int, 1, MAX_WORKERS), default=2, help="evaluation processes (2)"
+    )
+    b.add_argument(
+        "--cpu-limit",
+        type=ranged(int, 1, MAX_CPU_S),
+        default=defaults.cpu_s,
+        help=f"CPU seconds per process ({defaults.cpu_s}; at most this host's hard limit)",
+    )
     b.add_argument(
         "--memory-limit",
-        type=int,
+        type=ranged(int, 64, MAX_MEMORY_MB),
         default=defaults.memory_mb,
-        help="address space per process, MiB",
+        help=f"address space per process, MiB ({defaults.memory_mb}; at least 64, at most this "
+        "host's hard limit)",
     )
     b.add_argument(
         "--timeout",
-        type=float,
+        type=ranged(float, 0, MAX_WALL_S, low_in=False),
         default=defaults.wall_s,
-        help="wall-clock seconds per submission run",
+        help=f"wall-clock seconds per submission run ({defaults.wall_s:g}; finite, at most "
+        f"{MAX_WALL_S:g})",
     )
     b.add_argument(
         "--reference",
@@ -135,18 +152,11 @@ def _build(args: argparse.Namespace) -> int:
     from cdr_bench.leaderboard.build import Options, run
     from cdr_bench.leaderboard.data import DEFAULT_REFERENCE
 
-    if args.workers < 1:
-        raise UserError(f"--workers must be >= 1, got {args.workers}")
-    if not 1 <= args.rerun_batches <= 30:
-        raise UserError(f"--rerun-batches: expected 1..30, got {args.rerun_batches}")
     if not 0 <= args.fresh_episodes <= 10_000 or args.fresh_episodes % 200:
         raise UserError(
             f"--fresh-episodes: expected a multiple of 200 in 0..10000, got {args.fresh_episodes}"
         )
-    if args.sample_seed is not None and not 0 <= args.sample_seed < 2**63:
-        raise UserError(f"--sample-seed: expected 0..2**63-1, got {args.sample_seed}")
-    if args.cpu_limit < 1 or args.memory_limit < 64 or args.timeout <= 0:
-        raise UserError("--cpu-limit, --memory-limit (>= 64 MiB) and --timeout must be positive")
+    check_host_limits(args.cpu_limit, args.memory_limit)
     d = _leaderboard_dir(args)
     opts = Options(
         leaderboard_dir=d,
@@ -165,6 +175,25 @@ def _build(args: argparse.Namespace) -> int:
     if rc == 0 or args.check:
         rc = max(rc, _docs(d, args.check))
     return rc
+
+
+def check_host_limits(cpu_s: int, memory_mb: int) -> None:
+    """A one-line :class:`UserError` when a limit is above this host's hard limit (``ulimit
+    -Ht`` / ``-Hv``): the process that sets it could not, and would fail when started. The
+    CPU limit is set with a hard limit 5 s above it (:func:`~cdr_bench.evaluate.sandbox
+    .set_limits`)."""
+    import resource
+
+    from cdr_bench.errors import UserError
+
+    for flag, value, rlimit, margin, shift, unit in (
+        ("--cpu-limit", cpu_s, resource.RLIMIT_CPU, 5, 0, "CPU seconds (ulimit -Ht)"),
+        ("--memory-limit", memory_mb, resource.RLIMIT_AS, 0, 20, "MiB (ulimit -Hv)"),
+    ):
+        hard = resource.getrlimit(rlimit)[1]
+        if hard != resource.RLIM_INFINITY and (value << shift) + margin > hard:
+            most = (hard - margin) >> shift
+            raise UserError(f"{flag} {value}: this host's hard limit allows at most {most} {unit}")
 
 
 def _docs(lb_dir: Path, check: bool) -> int:
