@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from cdr_bench.checks import ranged
 from cdr_bench.rl.curriculum import Curriculum, CurriculumEnv
 from cdr_bench.rl.quick_eval import ActBatch, quick_eval
 
@@ -184,31 +185,10 @@ flag missing here is an error when its parser is built (tests/rl/test_flag_range
 
 
 def _ranged(kind: type, name: str) -> Any:
-    """The argparse ``type`` of a numeric flag: parse, then check :data:`FLAG_RANGES`."""
+    """The argparse ``type`` of a numeric flag: parse, then check :data:`FLAG_RANGES` (with the
+    one range check of every command, :func:`cdr_bench.checks.ranged`)."""
     low, high, low_in = FLAG_RANGES[name]
-    inf_ok = name == "q_target_max"
-
-    def parse(text: str) -> int | float:
-        try:
-            v = kind(text)
-        except ValueError:
-            what = "a whole number" if kind is int else "a number"
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        ok = v == v and (v > low if not low_in else v >= low) and v <= high
-        if kind is float and not inf_ok and abs(v) == _INF:
-            ok = False
-        if not ok:
-            lo_b = "[" if low_in else "("
-            lo_s = "-inf" if low == -_INF else f"{low:g}"
-            hi_s = "inf" if high == _INF else f"{high:g}"
-            hi_b = "]" if high != _INF or inf_ok else ")"
-            raise argparse.ArgumentTypeError(
-                f"expected a value in {lo_b}{lo_s}, {hi_s}{hi_b}, got {text}"
-            )
-        return v
-
-    parse.__name__ = kind.__name__
-    return parse
+    return ranged(kind, low, high, low_in=low_in, inf_ok=name == "q_target_max")
 
 
 def _type_name(f: dataclasses.Field) -> str:
