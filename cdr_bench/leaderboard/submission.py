@@ -510,8 +510,8 @@ TEXT_FIELDS: dict[str, int] = {
 
 
 def _text_problems(data: dict[str, Any]) -> list[tuple[str, str]]:
-    """Every problem of the free-text fields given as strings (other types are reported by
-    the field's own check): see :func:`cdr_bench.leaderboard.text.text_problems`."""
+    """The first problem of each free-text field given as a string (other types are reported
+    by the field's own check): see :func:`cdr_bench.leaderboard.text.text_problems`."""
     values: list[tuple[str, Any, int]] = [(k, data.get(k), n) for k, n in TEXT_FIELDS.items()]
     authors = data.get("authors")
     out: list[tuple[str, str]] = []
@@ -526,7 +526,7 @@ def _text_problems(data: dict[str, Any]) -> list[tuple[str, str]]:
     for field, v, limit in values:
         if isinstance(v, str):
             name = field == "display_name"
-            out += [(field, m) for m in tx.text_problems(v.strip(), limit=limit, name=name)]
+            out += [(field, m) for m in tx.text_problems(v.strip(), limit=limit, name=name)[:1]]
     training = data.get("training")
     if isinstance(training, str) and "`" in training:
         out.append(("training", "a backtick is not allowed (the command is shown as code)"))

@@ -44,20 +44,16 @@ _SCRIPT_URL = re.compile(r"(?i)(javascript|vbscript)\s*:|data:[a-z]+/")
 
 
 def text_problems(value: str, *, limit: int, name: bool = False) -> list[str]:
-    """What is wrong with a one-line free-text value (empty when nothing): longer than
-    ``limit``, more than one line, a control or invisible character, a script URL
+    """What is wrong with a one-line free-text value (empty when nothing), the most telling
+    first: more than one line, a control or invisible character, a script URL
     (``javascript:``, ``vbscript:``, ``data:``); with ``name``, any character other than
     letters, digits and :data:`NAME_PUNCTUATION`, or a first character other than a letter or
-    a digit."""
+    a digit; longer than ``limit``."""
     out = []
-    if len(value) > limit:
-        out.append(f"expected at most {limit} characters, got {len(value)}")
     if "\n" in value or "\r" in value or "\u2028" in value or "\u2029" in value:
         out.append("expected one line, got a line break")
     for i, ch in enumerate(value):
-        if ch in "\n\r":
-            continue
-        if unicodedata.category(ch) in _INVISIBLE:
+        if ch not in "\n\r" and unicodedata.category(ch) in _INVISIBLE:
             out.append(f"control or invisible character U+{ord(ch):04X} at position {i + 1}")
             break
     if name:
@@ -74,6 +70,8 @@ def text_problems(value: str, *, limit: int, name: bool = False) -> list[str]:
     m = _SCRIPT_URL.search(value)
     if m:
         out.append(f"a script URL ({short_repr(m.group(0))}) is not allowed")
+    if len(value) > limit:
+        out.append(f"expected at most {limit} characters, got {len(value)}")
     return out
 
 
@@ -93,10 +91,13 @@ def md_text(value: str) -> str:
     """``value`` as Markdown text that renders as ``value`` itself: no emphasis, link, image,
     code, raw HTML, entity or block marker can come from it. ``_`` is escaped except between
     two letters or digits (where it never starts emphasis), ``|`` is left to the table writer
-    (``md_table`` escapes it in cells)."""
+    (``md_table`` escapes it in cells). A line break (refused in submissions) becomes a space:
+    text stays on its line of the page."""
     out = []
     for i, ch in enumerate(value):
-        if ch in _MD_ENTITY:
+        if ch in "\r\n\v\f\x1c\x1d\x1e\x85\u2028\u2029":
+            out.append(" ")
+        elif ch in _MD_ENTITY:
             out.append(_MD_ENTITY[ch])
         elif ch in _MD_BACKSLASH or (i == 0 and ch in _MD_LINE_START):
             out.append("\\" + ch)
