@@ -1,0 +1,327 @@
+"""A hostile submission against the trusted side and the sandbox's limits: code planted where
+the scorer would import it, an agent module named like a real one, an agent that fills the
+RAM-backed mounts, creates user namespaces, reads files its identity does not cover, or outlives
+a killed evaluator, and a forged ``--resume`` checkpoint line. Each case held on the code
+before the sandbox and scorer were tightened (it fails there) and is refused now."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from cdr_bench.evaluate.loader import AgentError
+from cdr_bench.evaluate.remote import AgentOptions, AgentProcess
+from cdr_bench.evaluate.results import PartialLog, canonical, resume_key_path, sha256_text
+from cdr_bench.evaluate.sandbox import Confinement, Limits, isolation, seccomp_filter
+from tests.leaderboard.conftest import make_repo, submission_yaml
+
+pytestmark = pytest.mark.skipif(
+    isolation()[0] != "bwrap", reason=f"needs bubblewrap: {isolation()[1]}"
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+DIRECT = (ROOT / "agents" / "direct" / "agent.py").read_text()
+
+
+def build(root: Path, *args: object, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """``cdr-bench leaderboard build ARGS`` in ``root``, started with ``-P`` so that the build
+    process itself does not import from ``root`` (as the ``cdr-bench`` command does not)."""
+    return subprocess.run(
+        [sys.executable, "-P", "-m", "cdr_bench", "leaderboard", "build", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=timeout,
+    )
+
+
+def planted_json(marker: Path) -> str:
+    """A ``json.py`` that records every process importing it, then stands in for the real
+    ``json`` so that the importer carries on."""
+    return textwrap.dedent(
+        f"""
+        import os, sys, sysconfig
+        try:
+            with open({str(marker)!r}, "a") as f:
+                f.write(f"{{os.getpid()}} {{sys.argv}}\\n")
+        except OSError:
+            pass
+        sys.modules.pop(__name__, None)
+        sys.path[:] = [p for p in sys.path if p not in ("", os.getcwd())]
+        import importlib
+        sys.modules[__name__] = importlib.import_module("json")
+        """
+    )
+
+
+def test_root_json_py_as_agent_is_refused_and_never_imported(tmp_path: Path) -> None:
+    root = tmp_path / "repo"
+    lb = make_repo(root)
+    marker = tmp_path / "hijacked"
+    (root / "json.py").write_text(planted_json(marker) + "\n" + DIRECT)
+    (lb / "submissions" / "hijack.yaml").write_text(submission_yaml("json.py"))
+    r = build(root, "--evaluate", "hijack", "--episodes", 4, "--reference", "weave")
+    assert r.returncode != 0, r.stderr
+    assert "repository root" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not marker.exists(), marker.read_text()
+
+
+def test_module_planted_at_the_root_is_not_imported_by_the_scorer(tmp_path: Path) -> None:
+    root = tmp_path / "repo"
+    lb = make_repo(root)
+    (lb / "submissions" / "weave.yaml").unlink()
+    marker = tmp_path / "hijacked"
+    (root / "json.py").write_text(planted_json(marker))
+    r = build(root, "--evaluate", "--episodes", 4, "--reference", "direct")
+    assert r.returncode == 0, r.stderr
+    assert not marker.exists(), marker.read_text()
+
+
+@pytest.mark.parametrize("name", ["numpy.py", "json.py", "cdr_bench.py"])
+def test_agent_module_shadowing_a_real_one_is_refused(tmp_path: Path, name: str) -> None:
+    root = tmp_path / "repo"
+    lb = make_repo(root)
+    (root / "agents" / "evil").mkdir()
+    (root / "agents" / "evil" / "agent.py").write_text(DIRECT)
+    (root / "agents" / "evil" / name).write_text("raise SystemExit('shadowed')\n")
+    (lb / "submissions" / "evil.yaml").write_text(submission_yaml("agents/evil"))
+    r = build(root, "--evaluate", "evil", "--episodes", 4, "--reference", "weave")
+    assert r.returncode != 0, r.stderr
+    module = name.removesuffix(".py")
+    assert f"would shadow the module `{module}`" in r.stderr, r.stderr
+
+
+# ----------------------------------------------------------------------------------------------
+# Probes inside the sandbox: an agent that reports what it saw through its load error
+
+
+def probe(folder: Path, code: str) -> dict[str, object]:
+    """Run ``code`` (which sets ``out``, a dict) at import of an agent in ``folder``, confined
+    as ``evaluate --sandbox`` run from ``folder.parent`` confines it; returns ``out``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    agent = folder / "agent.py"
+    agent.write_text(
+        "import json\nout = {}\n"
+        + textwrap.dedent(code)
+        + "\nraise RuntimeError('PROBE ' + json.dumps(out))\n"
+    )
+    limits = Limits(cpu_s=60, memory_mb=2048)
+    conf = Confinement(view=str(folder.parent), limits=limits)
+    cwd = os.getcwd()
+    os.chdir(folder.parent)
+    try:
+        with pytest.raises(AgentError) as e:
+            AgentProcess(agent, AgentOptions(confinement=conf, limits=limits, load_timeout_s=60))
+    finally:
+        os.chdir(cwd)
+    text = str(e.value)
+    assert "PROBE " in text, text
+    return dict(json.loads(text.rsplit("PROBE ", 1)[1].splitlines()[0]))
+
+
+def test_writing_100_mb_to_tmp_hits_the_cap(tmp_path: Path) -> None:
+    out = probe(
+        tmp_path / "agents" / "filler",
+        """
+        import os
+        for where in ("/tmp", "/dev/shm", os.environ["HOME"], "/", "/dev"):
+            n = 0
+            try:
+                with open(os.path.join(where, "fill"), "wb") as f:
+                    for _ in range(300 if where == os.environ["HOME"] else 100):
+                        f.write(b"x" * 2**20)
+                        f.flush()
+                        n += 1
+            except OSError as e:
+                out[where] = [n, e.errno]
+            else:
+                out[where] = [n, 0]
+        """,
+    )
+    for where, written in out.items():
+        mib, err = written  # type: ignore[misc]
+        assert mib < 100 or (mib < 300 and where not in ("/tmp", "/dev/shm")), (where, mib)
+        assert err != 0, (where, mib, err)
+
+
+def test_no_user_namespace_no_unshare_unprivileged_uid(tmp_path: Path) -> None:
+    out = probe(
+        tmp_path / "agents" / "nested",
+        """
+        import ctypes, os
+        libc = ctypes.CDLL(None, use_errno=True)
+        out["uid"], out["gid"] = os.getuid(), os.getgid()
+        for name, flag in (("user", 0x10000000), ("mount", 0x20000), ("net", 0x40000000)):
+            out[name] = [libc.unshare(flag), ctypes.get_errno()]
+        out["mount_call"] = [libc.mount(b"none", b"/tmp", b"tmpfs", 0, None), ctypes.get_errno()]
+        """,
+    )
+    assert out["uid"] == 65534 and out["gid"] == 65534, out
+    for name in ("user", "mount", "net", "mount_call"):
+        assert out[name][0] == -1, (name, out)  # type: ignore[index]
+
+
+def test_seccomp_filter_exists_for_this_machine() -> None:
+    program = seccomp_filter()
+    assert program is not None and len(program) % 8 == 0
+    assert seccomp_filter("sparc") is None
+
+
+def test_files_outside_the_identity_are_invisible(tmp_path: Path) -> None:
+    base = tmp_path / "agents" / "curious"
+    (base / "results").mkdir(parents=True)
+    (base / "results" / "leak.py").write_text("ANSWER = 42\n")
+    (base / "table.dat").write_text("secret\n")
+    (base / "config.json").write_text("{}\n")
+    (tmp_path / "leaderboard" / "results").mkdir(parents=True)
+    (tmp_path / "leaderboard" / "results" / "mvp.json").write_text("{}\n")
+    (tmp_path / "notes.txt").write_text("host file\n")
+    out = probe(
+        base,
+        """
+        import os
+        here = os.path.dirname(os.path.abspath(__file__))
+        for rel in ("results/leak.py", "table.dat", "config.json", "agent.py"):
+            out[rel] = os.path.exists(os.path.join(here, rel))
+        out["leaderboard"] = os.path.exists("leaderboard")
+        out["notes"] = os.path.exists("notes.txt")
+        out["listing"] = sorted(os.listdir(here))
+        """,
+    )
+    assert out["agent.py"] and out["config.json"], out
+    assert not out["results/leak.py"] and not out["table.dat"], out
+    assert not out["leaderboard"] and not out["notes"], out
+    assert out["listing"] == ["agent.py", "config.json"], out
+
+
+# ----------------------------------------------------------------------------------------------
+# Nothing outlives its parent
+
+
+PARENT = """
+import sys, time
+from cdr_bench.evaluate.remote import AgentOptions, AgentProcess
+from cdr_bench.evaluate.sandbox import Confinement, Limits
+agent, sandbox = sys.argv[1], sys.argv[2] == "1"
+limits = Limits(cpu_s=600, memory_mb=2048)
+conf = Confinement(view=sys.argv[3], limits=limits) if sandbox else None
+p = AgentProcess(agent, AgentOptions(confinement=conf, limits=limits if sandbox else None))
+print("ready", flush=True)
+time.sleep(600)
+"""
+
+SPAWNER = """
+import subprocess, sys, threading, time
+threading.Thread(target=time.sleep, args=(600,)).start()  # keeps the agent process alive
+subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)", "{marker}"],
+                 start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+class Agent:
+    def __init__(self, observation_space, action_space):
+        pass
+
+    def act(self, observation):
+        return 13
+"""
+
+
+def processes_with(marker: str) -> list[int]:
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if marker.encode() in cmd:
+            found.append(int(pid))
+    return found
+
+
+@pytest.mark.parametrize("sandbox", [True, False])
+def test_kill_9_of_the_evaluator_leaves_no_agent_process(tmp_path: Path, sandbox: bool) -> None:
+    marker = f"cdr-bench-orphan-{os.getpid()}-{int(sandbox)}"
+    folder = tmp_path / "agents" / marker  # the agent host's command line names it
+    folder.mkdir(parents=True)
+    (folder / "agent.py").write_text(SPAWNER.format(marker=marker))
+    parent = subprocess.Popen(
+        [sys.executable, "-P", "-c", PARENT, str(folder / "agent.py"), str(int(sandbox)),
+         str(tmp_path)],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        assert parent.stdout is not None
+        assert parent.stdout.readline().strip() == "ready", parent.stderr.read()  # type: ignore[union-attr]
+        assert processes_with(marker), "the agent process did not start"
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(timeout=10)
+        deadline = time.monotonic() + 10
+        left = processes_with(marker)
+        while time.monotonic() < deadline:
+            # plain mode: the agent host dies; a setsid grandchild may outlive it (documented)
+            left = [p for p in processes_with(marker) if sandbox or "agent_host" in _cmdline(p)]
+            if not left:
+                break
+            time.sleep(0.2)
+        assert not left, [_cmdline(p) for p in left]
+    finally:
+        for pid in processes_with(marker):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if parent.poll() is None:
+            parent.kill()
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+# ----------------------------------------------------------------------------------------------
+# --resume
+
+
+def test_forged_resume_line_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    run_key = sha256_text("a run")
+    log = PartialLog(tmp_path / "r.partial.jsonl", run_key)
+    log.start({"run_key": run_key})
+    log.append({"scenario": "high", "batch": 0, "episodes": [{"outcome": "los"}]})
+    assert len(PartialLog(log.path, run_key).load()) == 1
+    key = resume_key_path(log.path).read_bytes()
+    assert (
+        key.hex() not in log.path.read_text()
+        and oct(resume_key_path(log.path).stat().st_mode)[-3:] == "600"
+    )
+    # forged from what the file holds: the run key, the content, the old digest's recipe
+    body = {"scenario": "high", "batch": 1, "episodes": [{"outcome": "success"}]}
+    forged = {
+        "kind": "batch",
+        **body,
+        "digest": sha256_text(run_key + "\n" + canonical(body)),
+        "mac": sha256_text(run_key + "\n" + canonical(body)),
+    }
+    with open(log.path, "a") as f:
+        f.write(json.dumps(forged) + "\n")
+    with pytest.raises(ValueError, match="MAC does not match"):
+        PartialLog(log.path, run_key).load()
+    # and without its key (another user, machine or path), nothing is resumed
+    resume_key_path(log.path).unlink()
+    with pytest.raises(ValueError, match="key"):
+        PartialLog(log.path, run_key).load()
