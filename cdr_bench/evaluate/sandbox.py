@@ -84,8 +84,10 @@ process group killed at the end and the parent-death signal on the agent's own p
 the agent can read and write every file the user can; what it starts with ``setsid`` may
 outlive an evaluator killed with ``kill -9``. The same holds for plain ``evaluate`` (no
 ``--sandbox``): the agent runs in its own process, as the user, with the user's files; its
-working directory and ``HOME`` are the user's; the evaluator alone writes the result, but
-nothing stops the agent from writing files (that one included) itself.
+``TMPDIR`` is a private scratch folder (removed afterwards), its working directory and ``HOME``
+are the user's; the evaluator alone writes the result, but nothing stops the agent (or a
+process it detached, which can outlive the evaluator) from writing files, that one included,
+or ``--resume`` keys in the user's cache folder.
 """
 
 from __future__ import annotations
