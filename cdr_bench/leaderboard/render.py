@@ -9,7 +9,8 @@ never ranked), success per tactical scenario, one table per scenario, the entrie
 tables and "published vs measured here". The HTML page adds a filter by group (scripted,
 learned, ablation, published), sortable tables and the replays: the same tactical episodes
 flown by each replayed entry, side by side, drawn on canvases from the recorded trajectories.
-It has no external assets: CSS, scripts and data are inline, the plots are data URIs.
+It has no external assets: CSS, scripts and data are inline; the plots are the PNG files written
+beside it (`plots/NAME`), linked rather than embedded, so the page stays small (0.2 MB).
 """
 
 from __future__ import annotations
