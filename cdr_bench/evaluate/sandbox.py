@@ -761,6 +761,7 @@ def confined(
     ``scratch`` as its private scratch folder. The program runs with ``python -P`` semantics
     where it is this Python (no folder of the caller on its import path)."""
     kind, _ = isolation()
+    scratch = Path(scratch).resolve()  # a relative path would name another folder inside
     extra = dict(env_extra or {})
     if numba_seed is not None:
         extra["CDR_BENCH_NUMBA_SEED"] = NUMBA_SEED if kind == "bwrap" else str(numba_seed)
