@@ -179,7 +179,7 @@ def fisher_exact(k1: int, n1: int, k2: int, n2: int) -> float:
     lo, hi = max(0, k - n2), min(k, n1)
     weights = {x: math.comb(n1, x) * math.comb(n2, k - x) for x in range(lo, hi + 1)}
     observed = weights[k1]
-    limit = observed * (1 + 1e-7)
+    limit = observed + observed // 10**7  # exact integers: no float overflow
     tail = sum(w for w in weights.values() if w <= limit)
     return min(1.0, tail / math.comb(total, k))
 

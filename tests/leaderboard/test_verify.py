@@ -241,6 +241,9 @@ def test_fisher_exact_is_scipys_and_keeps_its_false_alarm_rate() -> None:
     from cdr_bench.leaderboard.verify import fisher_exact
 
     rng = np.random.default_rng(0)
+    assert fisher_exact(517, 1000, 100, 200) == pytest.approx(
+        scipy_fisher([[517, 483], [100, 100]])[1], rel=1e-9
+    )  # binomial coefficients far beyond a float
     for _ in range(200):
         n1, n2 = int(rng.integers(1, 300)), int(rng.integers(1, 300))
         k1, k2 = int(rng.integers(0, n1 + 1)), int(rng.integers(0, n2 + 1))
