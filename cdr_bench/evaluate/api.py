@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -123,8 +124,14 @@ def evaluate(
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
+    agent_key: str = "",
 ) -> dict[str, Any]:
     """Run every job, write ``out`` (JSON) and its JSONL, and return the result dict.
+
+    ``agent_key`` (hex, drawn by a scorer that does not trust the agent): the agent's ``reset``
+    seeds are derived with it (:func:`cdr_bench.evaluate.runner.batch_seed`), so they do not
+    tell the agent which public episodes it flies; it is recorded in the result
+    (``agent_seed_key``) once the run is over, so that the run can be checked again.
 
     ``backend`` runs the episode batches in ``workers`` local processes (``"local"``) or as Ray
     tasks (``"ray"``: a local Ray with ``workers`` CPUs, or the cluster at ``address``); the
@@ -145,6 +152,8 @@ def evaluate(
         raise UserError("--address needs --backend ray")
     if batch_size < 1:
         raise UserError(f"--batch-size must be >= 1, got {batch_size}")
+    if agent_key and not re.fullmatch(r"[0-9a-f]{1,64}", agent_key):
+        raise UserError("agent_key: expected up to 64 lowercase hexadecimal digits")
     options = agent_options or AgentOptions()
     check_timeout("--decision-timeout", options.decision_timeout_s)
     check_timeout("--load-timeout", options.load_timeout_s)
@@ -169,6 +178,7 @@ def evaluate(
                 "base_seed": base_seed,
                 "batch_size": batch_size,
                 "versions": versions,
+                **({"agent_seed_key": agent_key} if agent_key else {}),
             }
         )
     )
@@ -188,7 +198,9 @@ def evaluate(
     for j in jobs:
         for k in range(math.ceil(j.episodes / batch_size)):
             if (j.config.id, k) not in done:
-                tasks.append((agent_file, j.config, base_seed, k, batch_size, j.episodes, options))
+                tasks.append(
+                    (agent_file, j.config, base_seed, k, batch_size, j.episodes, options, agent_key)
+                )
     total = sum(j.episodes for j in jobs)
     already = sum(len(b["episodes"]) for b in done.values())
     bar = _progress(total, already, identity["name"], progress)
@@ -254,6 +266,7 @@ def evaluate(
         "base_seed": base_seed,
         "batch_size": batch_size,
         "seed_derivation": SEED_DERIVATION,
+        **({"agent_seed_key": agent_key} if agent_key else {}),
         "versions": versions,
         "run_key": run_key,
         "episodes_file": rf.episodes_path(out).name,
@@ -285,13 +298,15 @@ def record_traces(
     agent_options: AgentOptions | None = None,
     batch_size: int = DEFAULT_BATCH_SIZE,
     n_episodes: int = PAPER_EPISODES,
+    agent_key: str = "",
 ) -> list[dict[str, Any]]:
     """Trajectories of episodes ``0 .. episodes - 1`` of ``scenario`` flown by the agent
     (:func:`cdr_bench.evaluate.runner.run_batch` with ``trace``), for replays.
 
     The whole first batch of an evaluation with ``batch_size`` and ``n_episodes`` is run, so
     the traced episodes are exactly those of such an evaluation (the same seeds, and the same
-    agent reset seed and batch, so a stochastic agent draws the same actions too); their
+    agent reset seed (with the same ``agent_key``) and batch, so a stochastic agent draws the
+    same actions too); their
     ``outcomes`` equal the evaluation's records.
     """
     config = scenario if isinstance(scenario, ScenarioConfig) else load_scenario(scenario)
@@ -300,7 +315,9 @@ def record_traces(
         raise UserError(f"episodes to trace: expected 1..{size}, got {episodes}")
     agent = load_for(str(resolve_agent_path(agent_path)), config, agent_options)
     try:
-        batch = run_batch(agent, config, base_seed, 0, batch_size, n_episodes, trace=episodes)
+        batch = run_batch(
+            agent, config, base_seed, 0, batch_size, n_episodes, trace=episodes, agent_key=agent_key
+        )
     finally:
         close_all()
     return list(batch["traces"])

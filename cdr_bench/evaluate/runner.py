@@ -478,7 +478,10 @@ def run_batch_task(
     batch_size: int,
     n_episodes: int,
     options: AgentOptions,
+    agent_key: str = "",
 ) -> dict[str, Any]:
     """:func:`run_batch` with the agent of this process (the worker entry point)."""
     agent = load_for(agent_path, config, options)
-    return run_batch(agent, config, base_seed, batch_index, batch_size, n_episodes)
+    return run_batch(
+        agent, config, base_seed, batch_index, batch_size, n_episodes, agent_key=agent_key
+    )

@@ -337,6 +337,9 @@ def evaluate_submission(
             "out": str(replays),
         },
         "rerun": rerun,
+        # the agent's reset seeds are derived with a secret drawn now (recorded in the result
+        # when the run is over): they do not tell the agent which public episodes it flies
+        "agent_key": secrets.token_hex(16) if rerun is None else "",
     }
     spec_file = scratch / "spec.json"
     spec_file.parent.mkdir(parents=True, exist_ok=True)

@@ -107,6 +107,7 @@ def _evaluate(spec: dict[str, Any], options: Any) -> None:
         batch_size=spec["batch_size"],
         agent_options=options,
         progress=False,
+        agent_key=spec.get("agent_key", ""),
     )
 
 
@@ -150,6 +151,7 @@ def _analyses(spec: dict[str, Any], options: Any) -> None:
                     agent_options=options,
                     batch_size=spec["batch_size"],
                     n_episodes=spec["episodes"],
+                    agent_key=spec.get("agent_key", ""),
                 )
                 for sc in rp["scenarios"]
             }

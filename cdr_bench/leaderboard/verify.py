@@ -109,7 +109,8 @@ def check_batch(
         return out
     try:
         replay = [[str(a.get("actions", "")) for a in e["aircraft"]] for e in committed]
-        got = run_batch(agent, config, base_seed, batch, size, n, replay=replay)
+        key = str(result.get("agent_seed_key", ""))  # the scorer's, recorded after the run
+        got = run_batch(agent, config, base_seed, batch, size, n, replay=replay, agent_key=key)
     except (ReplayMismatch, ValueError, KeyError, TypeError) as e:
         out.differences.append(f"{scenario} batch {batch}: cannot be replayed ({e})")
         return out

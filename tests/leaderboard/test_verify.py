@@ -173,24 +173,32 @@ def test_agreement_verdict_applies_the_stated_tolerance() -> None:
 
 CLAIRVOYANT_AGENT = textwrap.dedent(
     """
+    import hashlib
+
     import numpy as np
 
     from cdr_bench.resolvers import mvp_actions
 
-    # The public episodes' reset seeds (computed beforehand from the public base seed).
+    # Fingerprints of the public episodes' first observations (computed beforehand from the
+    # public base seed and seed derivation).
     PUBLIC = {public!r}
+
+    def fingerprint(row):
+        return hashlib.sha256(np.round(row, 4).tobytes()).hexdigest()[:16]
 
     class Agent:
         def __init__(self, observation_space, action_space):
-            self.known = False
+            self.known = None
 
         def reset(self, seed):
-            self.known = seed in PUBLIC
+            self.known = None
 
         def act_batch(self, observations, masks):
-            if self.known:  # a plan for an episode it knows (here: the MVP resolver)
+            if self.known is None:  # the first step: which episodes are these?
+                self.known = all(fingerprint(r) in PUBLIC for r in observations)
+            if self.known:  # a plan for episodes it knows (here: the MVP resolver)
                 return mvp_actions(observations, masks)
-            a = np.full(len(observations), 22)  # one it has not seen: circles, never arrives
+            a = np.full(len(observations), 22)  # ones it has not seen: circles, never arrives
             return np.where(masks[np.arange(len(a)), a] == 1, a, 13)
 
         def act(self, observation):
@@ -200,29 +208,42 @@ CLAIRVOYANT_AGENT = textwrap.dedent(
 )
 
 
-def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path) -> None:
-    """An agent that recognises the public episodes (here from its reset seed; in general from
-    its first observations) flies well on them only: its committed records replay and its
-    re-run agrees, but its score on episodes drawn at check time is not consistent with the
-    committed one."""
-    from cdr_bench.evaluate.runner import batch_seed
+def _public_fingerprints() -> set[str]:
+    import hashlib
+
+    import numpy as np
+
+    from cdr_bench.evaluate.seeds import episode_seeds
     from cdr_bench.scenarios import load_scenario
+    from cdr_bench.vector_env import VectorEnv
     from tests.leaderboard.conftest import SCENARIOS
 
-    public = {batch_seed(0, s, load_scenario(s).config_hash(), 0) for s in SCENARIOS}
+    out = set()
+    for s in SCENARIOS:
+        config = load_scenario(s)
+        env = VectorEnv(config, num_envs=EPISODES)
+        obs, _ = env.reset(seeds=episode_seeds(0, s, config.config_hash(), 0, EPISODES))
+        out |= {hashlib.sha256(np.round(r, 4).tobytes()).hexdigest()[:16] for r in obs[:, 0]}
+    return out
+
+
+def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path) -> None:
+    """An agent that recognises the public episodes (from their first observations) flies well
+    on them only: its committed records replay and its re-run agrees, but its score on episodes
+    drawn at check time is not consistent with the committed one."""
     (repo / "agents" / "seer").mkdir()
-    (repo / "agents" / "seer" / "agent.py").write_text(CLAIRVOYANT_AGENT.format(public=public))
+    (repo / "agents" / "seer" / "agent.py").write_text(
+        CLAIRVOYANT_AGENT.format(public=_public_fingerprints())
+    )
     lb = repo / "leaderboard"
     (lb / "submissions" / "seer.yaml").write_text(submission_yaml("agents/seer"))
     r = cdr(*CHECK[:2], "--evaluate", "seer", *CHECK[3:], cwd=repo)
     assert r.returncode == 0, r.stderr
-    doc = json.loads((lb / "results" / "seer.json").read_text())
-    high = next(s for s in doc["scenarios"] if s["id"] == "high")
     from cdr_bench.evaluate.results import read_result
 
-    clean = read_result(lb / "results" / "seer.json")["scenarios"]
-    clean_high = next(s for s in clean if s["id"] == "high")["metrics"]["ownship"]
-    assert high["episodes"] == EPISODES and clean_high["clean_success_rate"]["count"] >= 4
+    scored = read_result(lb / "results" / "seer.json")
+    high = next(s for s in scored["scenarios"] if s["id"] == "high")["metrics"]["ownship"]
+    assert high["episodes"] == EPISODES and high["clean_success_rate"]["count"] >= 4
     # without the fresh-episode test it passes every other check
     r = cdr(*CHECK, "--fresh-episodes", 0, "--rerun-batches", 4, cwd=repo)
     assert r.returncode == 0, r.stderr
@@ -232,6 +253,46 @@ def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path
     assert "the committed score does not generalise" in r.stderr
     assert "direct: 200 fresh high episodes" in r.stderr  # honest entries pass it
     assert "results/direct.json" not in r.stderr and "results/weave" not in r.stderr
+
+
+def test_scored_reset_seeds_are_not_the_public_ones(repo: Path) -> None:
+    """The build scores with agent reset seeds derived with a secret key, recorded in the
+    result afterwards (so the check can ask the agent again with the same seeds)."""
+    (repo / "agents" / "seeds").mkdir()
+    (repo / "agents" / "seeds" / "agent.py").write_text(
+        textwrap.dedent(
+            """
+            import numpy as np
+
+            class Agent:
+                def __init__(self, observation_space, action_space):
+                    self.rng = np.random.default_rng(0)
+
+                def reset(self, seed):
+                    self.rng = np.random.default_rng(seed)  # a stochastic agent
+
+                def act_batch(self, observations, masks):
+                    a = self.rng.integers(0, 27, len(observations))
+                    return np.where(masks[np.arange(len(a)), a] == 1, a, 13)
+
+                def act(self, observation):
+                    return 13
+            """
+        )
+    )
+    lb = repo / "leaderboard"
+    (lb / "submissions" / "seeds.yaml").write_text(submission_yaml("agents/seeds"))
+    r = cdr(*CHECK[:2], "--evaluate", "seeds", *CHECK[3:], cwd=repo)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((lb / "results" / "seeds.json").read_text())
+    assert len(doc["agent_seed_key"]) == 32
+    r = cdr(*CHECK, "--rerun-batches", 4, "--fresh-episodes", 0, cwd=repo)
+    assert r.returncode == 0, r.stderr
+    assert "seeds: agent re-run on" in r.stderr and "(100.00 %" in r.stderr
+    doc["agent_seed_key"] = "0" * 32  # another key: another agent's decisions
+    (lb / "results" / "seeds.json").write_text(json.dumps(doc, indent=1) + "\n")
+    r = cdr(*CHECK, "--rerun-batches", 4, "--fresh-episodes", 0, cwd=repo)
+    assert r.returncode == 1 and "seeds: agent re-run on" in r.stderr, r.stderr
 
 
 def test_fisher_exact_is_scipys_and_keeps_its_false_alarm_rate() -> None:
