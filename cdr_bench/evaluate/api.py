@@ -25,7 +25,7 @@ from cdr_bench.evaluate.runner import (
     run_batch,
     run_batch_task,
 )
-from cdr_bench.evaluate.seeds import episode_seeds
+from cdr_bench.evaluate.seeds import episode_seeds, split_of
 from cdr_bench.scenarios import ScenarioConfig, list_scenarios, load_scenario
 
 PAPER_EPISODES = 1000
@@ -264,6 +264,7 @@ def evaluate(
         "agent": identity,
         "suite": suite,
         "base_seed": base_seed,
+        "split": split_of(base_seed),
         "batch_size": batch_size,
         "seed_derivation": SEED_DERIVATION,
         **({"agent_seed_key": agent_key} if agent_key else {}),

@@ -10,6 +10,7 @@ from typing import Any
 
 from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.seeds import SPLITS, VALIDATION
 
 
 def register(sub: Any) -> None:
@@ -43,10 +44,18 @@ def register(sub: Any) -> None:
         help=f"episodes per scenario (1000; at most {MAX_EPISODES})",
     )
     p.add_argument(
+        "--split",
+        choices=tuple(SPLITS),
+        default=None,
+        help="the episodes: validation (base seed 1, the default: tune and compare here), "
+        "validation-0 (base seed 0, the test set before 2026-11-27) or test (the "
+        "leaderboard's: score a finished agent once, never choose on it)",
+    )
+    p.add_argument(
         "--seed",
         type=ranged(int, 0, MAX_SEED),
-        default=0,
-        help="base seed of the episode seeds (0)",
+        default=None,
+        help="base seed of the episode seeds, instead of --split",
     )
     p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
     p.add_argument(
@@ -171,6 +180,15 @@ def agent_options(args: argparse.Namespace, agent: str) -> Any:
     )
 
 
+def base_seed_of(args: argparse.Namespace) -> int:
+    """The base seed ``--split`` or ``--seed`` names (validation by default)."""
+    if args.split is not None and args.seed is not None:
+        raise UserError("--split and --seed both name the episodes: give one")
+    if args.seed is not None:
+        return int(args.seed)
+    return SPLITS[args.split or VALIDATION]
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
     from cdr_bench.evaluate.report import summary_text
@@ -192,7 +210,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         args.agent,
         jobs,
         out,
-        base_seed=args.seed,
+        base_seed=base_seed_of(args),
         suite=suite,
         workers=args.workers,
         resume=args.resume,

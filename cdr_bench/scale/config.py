@@ -11,7 +11,9 @@ A sweep file (``sweeps/smoke.yaml`` is the smallest complete example)::
     grid: {T: [8, 10]}               # one of: grid (cartesian product), settings (a list of
                                      #   flag dicts) or one_at_a_time (vary one factor around
                                      #   ``fixed``; a value may be a dict setting several flags)
-    evaluation: {scenarios: [tactical/head-on], episodes: 4, seed: 0}   # names or YAML paths
+    evaluation: {scenarios: [tactical/head-on], episodes: 4}   # names or YAML paths; on the
+                                     #   validation episodes (split: validation or
+                                     #   validation-0, or a base seed: seed: N; never test)
     max_retries: 3                   # re-runs of a trial whose worker or node died
     num_cpus_per_trial: 1
 
@@ -35,6 +37,7 @@ import yaml
 
 from cdr_bench.checks import MAX_CONFIG_BYTES, read_input
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.seeds import SPLITS, TEST_SEED, VALIDATION
 
 RESERVED_FLAGS = ("run-dir", "seed", "total-steps", "max-wall-minutes", "resume", "progress")
 """Set by the sweep itself; a sweep file may not set them as hyper-parameters."""
@@ -55,7 +58,7 @@ _TOP_KEYS = {
     "description",
 }
 _BUDGET_KEYS = {"total_steps", "max_wall_minutes"}
-_EVAL_KEYS = {"scenarios", "episodes", "seed", "batch_size"}
+_EVAL_KEYS = {"scenarios", "episodes", "seed", "split", "batch_size"}
 
 
 @dataclass(frozen=True)
@@ -178,6 +181,28 @@ def _values(source: Path, where: str, value: Any) -> list[Any]:
     if not isinstance(value, list) or not value:
         raise _err(source, where, "expected a non-empty list")
     return value
+
+
+def _eval_seed(source: Path, ev: dict[str, Any]) -> int:
+    """The base seed of a sweep's evaluation: ``split`` (validation by default) or ``seed``;
+    never the leaderboard's test set (cdr_bench.evaluate.seeds)."""
+    if "split" in ev and "seed" in ev:
+        raise _err(source, "evaluation", "give split or seed, not both")
+    if "seed" in ev:
+        seed = _int(source, "evaluation.seed", ev["seed"], 0)
+    else:
+        split = ev.get("split", VALIDATION)
+        if split not in SPLITS:
+            raise _err(source, "evaluation.split", f"expected one of {list(SPLITS)}, got {split!r}")
+        seed = SPLITS[split]
+    if seed == TEST_SEED:
+        raise _err(
+            source,
+            "evaluation",
+            "the test episodes score a finished leaderboard entry once and nothing is chosen "
+            "on them; a sweep evaluates on validation (split: validation or validation-0)",
+        )
+    return seed
 
 
 def load_sweep(
@@ -308,7 +333,7 @@ def load_sweep(
             ev.get("episodes", 100) if episodes is None else episodes,
             1,
         ),
-        "seed": _int(source, "evaluation.seed", ev.get("seed", 0), 0),
+        "seed": _eval_seed(source, ev),
     }
     if ev.get("batch_size") is not None:
         evaluation["batch_size"] = _int(source, "evaluation.batch_size", ev["batch_size"], 1)
