@@ -5,15 +5,24 @@ each with the same config hash, episode count and episode seeds in both (common 
 numbers); anything else is refused. For each scenario, aircraft role and
 metric of the registry (:data:`cdr_bench.evaluate.metrics.METRICS`) the difference B - A comes
 with a 95 % paired percentile-bootstrap interval: episodes are resampled jointly for both agents
-(2000 resamples, fixed seed), and a metric is the ratio of per-episode sums of its facts
+(2000 resamples), and a metric is the ratio of per-episode sums of its facts
 (:meth:`~cdr_bench.evaluate.metrics.Metric.paired`; so learning intruders are resampled as whole
-episodes).
+episodes). Each scenario's resampled episodes come from a generator seeded with the sha256 of
+its id (:func:`scenario_indices`), so a scenario's interval is the same whichever other
+scenarios are compared (``--scenario high`` alone, all of them, or the leaderboard's claims).
+A metric that is one yes/no outcome per episode (:data:`BINARY`: success, clean success, LoS on
+the ownship) also gets McNemar's exact test (:func:`mcnemar_exact`: the two-sided binomial test
+of the discordant episodes, on exact integers); :func:`holm` adjusts the p-values of a
+statement that combines several tests.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
+import math
 import os
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -48,19 +57,73 @@ def _sums(
     return out
 
 
-@functools.lru_cache(maxsize=4)
-def _indices(sizes: tuple[int, ...]) -> list[NDArray[np.int64]]:
-    """The resampled positions of each compared scenario, drawn in turn from one generator
-    seeded with ``BOOTSTRAP_SEED`` (so a scenario's draw depends on the sizes before it); the
-    same for every pair of results on those scenarios, so drawn once (a leaderboard build
-    compares each entry with many others)."""
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    out = []
-    for n in sizes:
-        idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
-        idx.flags.writeable = False
-        out.append(idx)
+def scenario_seed(sid: str, salt: str = "") -> int:
+    """The bootstrap seed of one scenario: ``BOOTSTRAP_SEED`` and the scenario's id (``salt``
+    appended) hashed with sha256, so a scenario's resampled episodes do not depend on which
+    other scenarios are compared, nor on their order."""
+    h = hashlib.sha256(f"{BOOTSTRAP_SEED}/{sid}{salt}".encode()).digest()
+    return int.from_bytes(h[:8], "big")
+
+
+@functools.lru_cache(maxsize=64)
+def scenario_indices(sid: str, n: int) -> NDArray[np.int64]:
+    """The resampled positions ``(BOOTSTRAP_RESAMPLES, n)`` of scenario ``sid``, from a generator
+    seeded by :func:`scenario_seed`: the same for every pair of results and every subset of
+    compared scenarios (``compare A B --scenario high`` and the leaderboard give the same
+    interval), so drawn once per scenario (read-only)."""
+    rng = np.random.default_rng(scenario_seed(sid))
+    idx = rng.integers(0, n, (BOOTSTRAP_RESAMPLES, n))
+    idx.flags.writeable = False
+    return idx
+
+
+BINARY = frozenset({"success_rate", "clean_success_rate", "los_rate", "nmac_rate"})
+"""Metrics that are one yes/no outcome per episode for the ownship (one aircraft per episode):
+their paired comparison also gets McNemar's exact test (when every episode's fact is 0 or 1)."""
+
+
+def measurable(b: int, c: int, tests: int = 1, alpha: float = 0.05) -> bool:
+    """Whether ``b + c`` discordant episodes could reject at ``alpha`` even if all fell on one
+    side, after a Holm correction over ``tests`` tests (its strictest step): with fewer, the
+    test cannot decide and a claim resting on it is "not measurable", not "not held"."""
+    return tests * mcnemar_exact(b + c, 0) < alpha
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """McNemar's exact test: the two-sided binomial test (p = 1/2) of ``b`` against ``c``, the
+    discordant pairs (A yes, B no) and (A no, B yes); computed on exact integers and fractions
+    (``scipy.stats.binomtest(b, b + c).pvalue``). 1 when there is no discordant pair."""
+    if b < 0 or c < 0:
+        raise ValueError(f"discordant counts must be >= 0, got {b}, {c}")
+    n, k = b + c, min(b, c)
+    if n == 0 or b == c:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(k + 1))
+    return float(min(Fraction(1), Fraction(2 * tail, 2**n)))
+
+
+def holm(pvalues: list[float]) -> list[float]:
+    """Holm's step-down adjusted p-values (same order as given): the i-th smallest times
+    ``m - i`` (i from 0), made non-decreasing, capped at 1. A statement that combines ``m``
+    tests holds at 5 % for the tests whose adjusted p-value is below 0.05."""
+    m = len(pvalues)
+    order = sorted(range(m), key=lambda i: pvalues[i])
+    out = [0.0] * m
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * pvalues[i]))
+        out[i] = running
     return out
+
+
+def _discordant(na: NDArray[np.float64], nb: NDArray[np.float64]) -> tuple[int, int] | None:
+    """``(b, c)``: episodes A yes / B no and A no / B yes, when both sides are one 0/1 outcome per
+    episode (a denominator of 1 and a numerator of 0 or 1 everywhere); None otherwise."""
+    for nd in (na, nb):
+        if not (np.all(nd[:, 1] == 1) and np.all((nd[:, 0] == 0) | (nd[:, 0] == 1))):
+            return None
+    a, b = na[:, 0] == 1, nb[:, 0] == 1
+    return int(np.sum(a & ~b)), int(np.sum(~a & b))
 
 
 def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any:
@@ -148,8 +211,8 @@ def compare(
             raise UserError(f"not the same episodes: per-episode seeds of {sid} differ")
         pairs[sid] = (xa, xb)
     rows = []
-    draws = _indices(tuple(len(xa) for xa, _ in pairs.values()))
-    for (sid, (xa, xb)), idx in zip(pairs.items(), draws, strict=True):
+    for sid, (xa, xb) in pairs.items():
+        idx = scenario_indices(sid, len(xa))
         for role in sa[sid]["metrics"]:
             if role not in sb[sid]["metrics"]:
                 continue
@@ -175,6 +238,7 @@ def compare(
                         "ci95": [lo, hi],
                         "significant": bool(lo > 0 or hi < 0),
                         **({"undefined": undefined} if undefined else {}),
+                        **_mcnemar(name, na[name], nb[name]),
                     }
                 )
     notes += _undefined_notes(rows)
@@ -185,6 +249,16 @@ def compare(
         "notes": notes,
         "rows": rows,
     }
+
+
+def _mcnemar(name: str, na: NDArray[np.float64], nb: NDArray[np.float64]) -> dict[str, Any]:
+    """``{"mcnemar": {b, c, p}}`` for a binary metric (:data:`BINARY`), else nothing."""
+    if name not in BINARY:
+        return {}
+    bc = _discordant(na, nb)
+    if bc is None:
+        return {}
+    return {"mcnemar": {"b": bc[0], "c": bc[1], "p": mcnemar_exact(*bc)}}
 
 
 def _why_undefined(key: str) -> str:
@@ -221,9 +295,16 @@ def _fmt(spec: str, x: float) -> str:
     return "n/a" if x != x else spec.format(x)
 
 
+def _fmt_mcnemar(m: dict[str, Any] | None) -> str:
+    return "" if m is None else f"{m['p']:.3g} ({m['b']}/{m['c']})"
+
+
 def comparison_table(cmp: dict[str, Any]) -> str:
     a, b = cmp["a"]["agent"], cmp["b"]["agent"]
-    head = ["scenario", "aircraft", "metric", f"A={a}", f"B={b}", "B-A", "95% paired CI", ""]
+    head = [
+        "scenario", "aircraft", "metric", f"A={a}", f"B={b}", "B-A", "95% paired CI", "",
+        "McNemar p (A+/B-, A-/B+)",
+    ]  # fmt: skip
     rows = [head]
     kinds = {m.key: m.kind for m in METRICS}
     for r in cmp["rows"]:
@@ -241,6 +322,7 @@ def comparison_table(cmp: dict[str, Any]) -> str:
                 _fmt(df, scale * r["diff"]),
                 f"[{_fmt(df, scale * lo)}, {_fmt(df, scale * hi)}]",
                 "*" if r["significant"] else "",
+                _fmt_mcnemar(r.get("mcnemar")),
             ]
         )
     w = [max(len(r[i]) for r in rows) for i in range(len(head))]

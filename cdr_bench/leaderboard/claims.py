@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.evaluate import aggregate
+from cdr_bench.evaluate.compare import holm, measurable
 from cdr_bench.evaluate.metrics import (
     BOOTSTRAP_RESAMPLES,
     BOOTSTRAP_SEED,
@@ -63,6 +64,9 @@ NMAC_REDUCTION = 0.59
 """§Abstract and §1: NMAC "reduced by approximately 59 %" against the next-best baseline."""
 
 HELD, NOT_HELD, NOT_MEASURED = "held", "not held", "not measured"
+NOT_MEASURABLE = "not measurable"
+"""The test exists but has too few events (discordant episodes) to decide either way."""
+ALPHA = 0.05
 
 DPSC_REDUCTION = 0.14
 """§1: DPSC reduces "convergence steps by approximately 14 %"."""
@@ -153,6 +157,15 @@ def _iv(ci: list[float] | None, scale: float = 100.0, unit: str = " pp") -> str:
     return f"[{scale * ci[0]:+.1f}, {scale * ci[1]:+.1f}]{unit}"
 
 
+def _ev(d: dict[str, Any]) -> str:
+    """A paired difference as evidence: its interval, and McNemar's p with the discordant
+    episodes (A+/B-, A-/B+) when the outcome is binary."""
+    mc = d.get("mcnemar")
+    return _iv(d["ci95"]) + (
+        "" if mc is None else f", McNemar p = {mc['p']:.3g} ({mc['b']}/{mc['c']})"
+    )
+
+
 def _nmac_reduction(a: Any, b: Any) -> tuple[float | None, list[float] | None]:
     """1 - NMAC(a) / NMAC(b) on the ownship at :data:`SCENARIO`, with a paired 95 % bootstrap
     interval over episodes (integer counts; resamples with a zero denominator dropped)."""
@@ -241,11 +254,27 @@ def build_claims(
             add(f"best-{metric}", f"Diffusion-AC has {what} at high density", "Table 2",
                 pub_text, "-", NOT_MEASURED, "no entry reproduces the rows")  # fmt: skip
             continue
-        worse_than, tied = [], []
-        for row, e in base.items():
-            d = paired.metric(dac, e, SCENARIO, metric)  # e - dac
-            better_dac = (d["ci95"][1] < 0) if higher else (d["ci95"][0] > 0)
-            better_e = (d["ci95"][0] > 0) if higher else (d["ci95"][1] < 0)
+        worse_than, tied, few = [], [], []
+        ds = {row: paired.metric(dac, e, SCENARIO, metric) for row, e in base.items()}  # e - dac
+        exact = all("mcnemar" in d for d in ds.values())
+        # "better than each baseline" combines one test per baseline: Holm over them
+        adj = (
+            dict(zip(ds, holm([d["mcnemar"]["p"] for d in ds.values()]), strict=True))
+            if exact
+            else {}
+        )
+        for row, d in ds.items():
+            if exact:
+                sig = adj[row] < ALPHA
+                up = d["diff"] > 0
+                better_dac = sig and (up != higher)
+                better_e = sig and (up == higher)
+                mc = d["mcnemar"]
+                if not sig and not measurable(mc["b"], mc["c"], len(ds)):
+                    few.append((row, d))
+            else:
+                better_dac = (d["ci95"][1] < 0) if higher else (d["ci95"][0] > 0)
+                better_e = (d["ci95"][0] > 0) if higher else (d["ci95"][1] < 0)
             if better_e:
                 worse_than.append((row, d))
             elif not better_dac:
@@ -257,15 +286,20 @@ def build_claims(
             verdict, why = HELD, "significantly better than each baseline"
         elif worse_than:
             verdict = NOT_HELD
-            why = "significantly worse than " + ", ".join(
-                f"{r} ({_iv(d['ci95'])})" for r, d in worse_than
-            )
+            why = "significantly worse than " + ", ".join(f"{r} ({_ev(d)})" for r, d in worse_than)
         else:
-            verdict = NOT_HELD
-            why = "not separated from " + ", ".join(f"{r} ({_iv(d['ci95'])})" for r, d in tied)
+            verdict = NOT_MEASURABLE if len(few) == len(tied) else NOT_HELD
+            why = "not separated from " + ", ".join(f"{r} ({_ev(d)})" for r, d in tied)
+        test = (
+            "McNemar's exact test against each baseline, Holm-corrected over the "
+            f"{len(ds)} baselines (5 %), same episodes; too few discordant episodes to reject: "
+            "not measurable"
+            if exact
+            else "paired 95 % bootstrap against each baseline, same episodes"
+        )
         add(f"best-{metric}", f"Diffusion-AC has {what} of the five agents at high density",
             "§5.2.2, Table 2", pub_text, f"{vals}; Diffusion-AC {why}", verdict,
-            "paired 95 % bootstrap against each baseline, same 1000 episodes")  # fmt: skip
+            test)  # fmt: skip
 
     # 4: Table 2 ranking by success
     pub_rows = [r for r in published.table("Table 2") if r.density == SCENARIO]
@@ -374,9 +408,10 @@ def build_claims(
             ka, na = _seed_counts(e, "success_rate")
             qc, _ = _seed_counts(comp, "clean_success_rate")
             qa, _ = _seed_counts(e, "clean_success_rate")
-            poi = aggregate.probability_of_improvement(kc, ka)
-            ci = aggregate.probability_of_improvement_interval(kc, ka)
-            assert ci is not None and n == na
+            assert n == na
+            poi, ci = aggregate.probability_of_improvement_two_level(
+                [[[int(k)] for k in kc[:, 0]]], [[[int(k)] for k in ka[:, 0]]], n
+            )
             add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
                 "§5.3.1, Table 3", pub_text,
                 f"success, mean over seeds: {_pct(float(kc.mean()) / n)} ({len(kc)} seeds) vs "
@@ -385,18 +420,25 @@ def build_claims(
                 f"clean success {_pct(float(qc.mean()) / n)} vs {_pct(float(qa.mean()) / n)} "
                 f"({comp.name} vs {e.name})",
                 HELD if ci[0] > 0.5 else NOT_HELD,
-                "probability of improvement over seeds, its 95 % stratified-bootstrap "
-                "interval above 0.5")  # fmt: skip
+                "probability of improvement over seeds, its 95 % two-level bootstrap "
+                "interval (seeds, then episodes) above 0.5")  # fmt: skip
             continue
         d = paired.metric(comp, e, SCENARIO, "success_rate")  # ablation - complete
         budget = comp.sub.name
+        mc = d.get("mcnemar")
+        if mc is None:
+            verdict = HELD if d["ci95"][1] < 0 else NOT_HELD
+        elif mc["p"] < ALPHA:
+            verdict = HELD if d["diff"] < 0 else NOT_HELD
+        else:
+            verdict = NOT_HELD if measurable(mc["b"], mc["c"]) else NOT_MEASURABLE
         add(f"ablation-{row}", f"Removing {row[4:]} lowers success (high density)",
             "§5.3.1, Table 3", pub_text,
             f"{_pct(value(comp, 'success_rate'))} vs {_pct(value(e, 'success_rate'))}, "
-            f"ablation - complete {_iv(d['ci95'])} (budget of {budget}, which both ran)",
-            HELD if d["ci95"][1] < 0 else NOT_HELD,
-            "paired 95 % bootstrap: the ablation significantly below the complete "
-            "method")  # fmt: skip
+            f"ablation - complete {_ev(d)} (budget of {budget}, which both ran)",
+            verdict,
+            "McNemar's exact test (5 %): the ablation significantly below the complete "
+            "method; too few discordant episodes: not measurable")  # fmt: skip
 
     # 12: DPSC convergence
     nodpsc = by_row.get("W/O DPSC")

@@ -6,20 +6,27 @@ and seeds); the per-episode file must reproduce the metrics of the result JSON; 
 difference is the evaluator's paired bootstrap (:func:`cdr_bench.evaluate.compare.compare`).
 
 **The headline score** (:data:`HEADLINE_METRIC` on :data:`HEADLINE_SCENARIO`): the ownship's
-clean success rate on ``high``, goal reached with no loss of separation at all, with its 95 %
-Wilson interval. Success alone does not separate agents (on ``high`` the never-manoeuvring
+clean success rate on ``high``, goal reached with no loss of separation at all, over the
+entry's training seeds (:class:`SeedPaired`): the mean of its independent units (seeds; seeds
+sharing a ``parent`` are one unit) up to four, their IQM beyond, a scripted entry's one run;
+with a 95 % two-level bootstrap interval (units, then the episodes of each drawn run). Paired
+differences (tie groups, the row above, the baseline) average the per-episode difference over
+seeds with the same two-level bootstrap, on ``compare``'s per-scenario episode indices.
+Success alone does not separate agents (on ``high`` the never-manoeuvring
 ``direct`` agent reaches its goal in 99 % of the episodes, the learned agents in 99.5-99.8 %):
 an agent that flies through a LoS still succeeds. Clean success counts the episodes an
 air-traffic controller would accept, rewards resolving rather than luck, and cannot be gamed
 by failing (a timeout, a boundary exit or an NMAC is not a clean success). Entries are ranked
-by it: the entries with the top score and every entry whose paired difference from one of
-them is not significant (95 % paired bootstrap interval contains 0) are statistically tied and
-ordered by :data:`TIE_BREAK` (extra path flown by successful flights, lower first: among
-agents that succeed equally often, the one that detours less), except that an entry never
-ranks above a tied one whose score is significantly higher; the first of them is the
-leader. Every other entry is significantly below the top score, and the same rule ranks them,
-tier by tier (the best remaining score, the entries not significantly below it, by the
-tie-break); each row also shows the paired difference from the row above.
+by it. Inside a tie group entries are ordered by :data:`TIE_BREAK` (extra path flown by
+successful flights, lower first: among agents that succeed equally often, the one that detours
+less), except that an entry never ranks above a member whose score is significantly higher;
+the first of the first group is the leader. A tie group is the best remaining score and the
+entries after it in score order down
+to the first one significantly below it; groups share a rank (``2=``) and follow each other
+strictly by score; each row also shows the paired difference from the row above. Entries are
+``scripted``, ``learned`` (from scratch), ``hybrid`` (MVP with a learned override) or
+``ablation``; the summary compares learned agents and hybrids with MVP apart, each "k of n"
+Holm-corrected.
 
 **Best values** are marked only on metrics whose better value cannot come from failing
 (:data:`MARK_BEST`): never on steps, extra path, delay or manoeuvres (an agent that ends early
@@ -42,7 +49,7 @@ from typing import Any
 
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import aggregate
-from cdr_bench.evaluate.compare import compare
+from cdr_bench.evaluate.compare import compare, holm, scenario_indices, scenario_seed
 from cdr_bench.evaluate.loader import agent_identity
 from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.evaluate.results import SCHEMA_VERSION, read_episodes, read_result
@@ -57,6 +64,9 @@ DEFAULT_REFERENCE = "diffusion-ac"
 DATA_VERSION = 5
 HEADLINE_SCENARIO = "high"
 HEADLINE_METRIC = "clean_success_rate"
+ALPHA = 0.05
+"""Significance level of every test on the pages (after Holm's correction where a statement
+combines several)."""
 TIE_BREAK = "extra_path_km"
 """Lower is better; breaks ties among the entries statistically tied with the leader."""
 PAPER_FIVE = ("success_rate", "los_rate", "nmac_rate", "timeout_rate", "avg_steps_success")
@@ -249,6 +259,8 @@ class Paired:
 
     def __init__(self) -> None:
         self._cache: dict[tuple[str, str, str], dict[str, dict[str, Any]]] = {}
+        self.seeds = SeedPaired()
+        """Scores and paired differences over seeds (the ranking's)."""
 
     def all(self, a: Entry, b: Entry) -> dict[tuple[str, str], dict[str, Any]]:
         shown = list(dict.fromkeys([*(c.key for c in MAIN_COLUMNS), HEADLINE_METRIC]))
@@ -274,7 +286,22 @@ class Paired:
             if metric in back:  # the same resampled episodes: b - a = -(a - b)
                 self._cache.setdefault(key, {}).update(
                     {
-                        m: {**r, "diff": -r["diff"], "ci95": [-r["ci95"][1], -r["ci95"][0]]}
+                        m: {
+                            **r,
+                            "diff": -r["diff"],
+                            "ci95": [-r["ci95"][1], -r["ci95"][0]],
+                            **(
+                                {
+                                    "mcnemar": {
+                                        **r["mcnemar"],
+                                        "b": r["mcnemar"]["c"],
+                                        "c": r["mcnemar"]["b"],
+                                    }
+                                }  # fmt: skip
+                                if "mcnemar" in r
+                                else {}
+                            ),
+                        }
                         for m, r in back.items()
                     }
                 )
@@ -286,13 +313,99 @@ class Paired:
         return self._cache[key]
 
 
+def _units(e: Entry) -> list[list[Entry]]:
+    """The independent units of an entry's runs: one per seed, except that seeds with the same
+    ``parent`` (trained on from one run) are one unit."""
+    parent = {s.seed: s.parent for s in e.sub.seeds}
+    out: dict[Any, list[Entry]] = {}
+    for seed, run in _runs(e):
+        p = parent.get(seed) if seed is not None else None
+        out.setdefault(("parent", p) if p else ("seed", seed), []).append(run)
+    return list(out.values())
+
+
+def _outcomes(run: Entry, sid: str, metric: str) -> Any:
+    """The ownship's 0/1 outcome of ``metric`` per episode of ``sid`` (file order)."""
+    import numpy as np
+
+    from cdr_bench.evaluate.metrics import get_metric, role_of
+
+    paired = get_metric(metric).paired
+    out = []
+    for ep in run.episodes:
+        if ep["scenario"] != sid:
+            continue
+        num = den = 0.0
+        for ac in ep["aircraft"]:
+            if role_of(ac["id"]) == "ownship":
+                a, b = paired(ac)
+                num, den = num + a, den + b
+        if den != 1 or num not in (0, 1):
+            raise UserError(f"{run.path}: {metric} is not one yes/no outcome per episode")
+        out.append(int(num))
+    return np.array(out, dtype=np.int64)
+
+
+class SeedPaired:
+    """The ranked score of each entry over its seeds and the paired differences between entries
+    averaged over seeds (:mod:`cdr_bench.evaluate.aggregate`'s two-level bootstrap), on one
+    metric; each computed once."""
+
+    def __init__(self, metric: str = HEADLINE_METRIC) -> None:
+        self.metric = metric
+        self._score: dict[tuple[str, str], dict[str, Any]] = {}
+        self._diff: dict[tuple[str, str, str], dict[str, Any]] = {}
+        self._out: dict[tuple[str, str], list[list[Any]]] = {}
+
+    def _vectors(self, e: Entry, sid: str) -> list[list[Any]]:
+        key = (e.name, sid)
+        if key not in self._out:
+            self._out[key] = [[_outcomes(r, sid, self.metric) for r in u] for u in _units(e)]
+        return self._out[key]
+
+    def score(self, e: Entry, sid: str) -> dict[str, Any]:
+        """``{value, ci95, seeds, units, aggregate}``: the mean (at most four units) or IQM over
+        the entry's units with its two-level 95 % interval (seeds, then episodes)."""
+        key = (e.name, sid)
+        if key not in self._score:
+            vec = self._vectors(e, sid)
+            n = len(vec[0][0])
+            counts = [[int(r.sum()) for r in u] for u in vec]
+            lo, hi = aggregate.seed_score_interval(counts, n, seed=scenario_seed(sid, e.name))
+            self._score[key] = {
+                "value": round(aggregate.seed_score(counts, n), 6),
+                "ci95": [round(lo, 6), round(hi, 6)],
+                "seeds": sum(len(u) for u in vec),
+                "units": len(vec),
+                "aggregate": aggregate.aggregate_name(len(vec)),
+            }
+        return self._score[key]
+
+    def diff(self, a: Entry, b: Entry, sid: str) -> dict[str, Any]:
+        """b - a: the per-episode paired difference averaged over seeds (each side's mean over
+        its units), with its two-level 95 % interval; with one run each, ``compare``'s."""
+        key = (a.name, b.name, sid)
+        if key not in self._diff:
+            back = self._diff.get((b.name, a.name, sid))
+            if back is not None:
+                lo, hi = back["ci95"]
+                self._diff[key] = {**back, "diff": -back["diff"], "ci95": [-hi, -lo]}
+            else:
+                va, vb = self._vectors(a, sid), self._vectors(b, sid)
+                idx = scenario_indices(sid, len(va[0][0]))
+                self._diff[key] = aggregate.paired_seed_difference(
+                    va, vb, idx, seed=scenario_seed(sid, f"/{a.name}/{b.name}")
+                )
+        return self._diff[key]
+
+
 def _value(e: Entry, sid: str, key: str) -> float | None:
     m = _ownship(e, sid).get(key)
     return None if m is None else m["value"]
 
 
 def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
-    """The ranking by the headline score (see the module docstring)."""
+    """The ranking by the headline score over seeds (see the module docstring)."""
     sid = HEADLINE_SCENARIO
     missing = [e.name for e in entries if e.scenario(sid) is None]
     if missing:
@@ -300,69 +413,71 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
             f"entries {', '.join(missing)} are not scored on {sid}, the headline scenario "
             f"({HEADLINE_METRIC} on {sid} ranks the leaderboard)"
         )
+    sp = paired.seeds
+    score = {e.name: sp.score(e, sid) for e in entries}
 
     def head(e: Entry) -> float:
-        v = _value(e, sid, HEADLINE_METRIC)
-        return -math.inf if v is None else v
+        v = score[e.name]["value"]
+        return -math.inf if v is None else float(v)
 
     def tie(e: Entry) -> float:
         v = _value(e, sid, TIE_BREAK)
         return math.inf if v is None else v
 
+    def below(o: Entry, e: Entry) -> bool:
+        """e significantly below o."""
+        d = sp.diff(o, e, sid)
+        return bool(d["significant"] and d["diff"] < 0)
+
     by_score = sorted(entries, key=lambda e: (-head(e), e.name))
-
-    def tier_of(remaining: list[Entry]) -> tuple[list[Entry], list[Entry]]:
-        """The remaining entries with the top score and those not significantly below one of
-        them, ordered by the tie-break but never above one with a significantly higher score;
-        and the top-score entries themselves."""
-        best = [e for e in remaining if head(e) == head(remaining[0])]
-        tied = best + [
-            e
-            for e in remaining[len(best) :]
-            if head(e) > -math.inf
-            and any(not paired.get(b, e, sid)[HEADLINE_METRIC]["significant"] for b in best)
-        ]
-        left = sorted(tied, key=lambda e: (tie(e), -head(e), e.name))
-        out = []
-        while left:
-
-            def beaten(e: Entry) -> bool:
-                return any(
-                    head(o) > head(e) and paired.get(o, e, sid)[HEADLINE_METRIC]["significant"]
-                    for o in left
-                    if o is not e
-                )
-
-            pick = next((e for e in left if not beaten(e)), left[0])
-            out.append(pick)
-            left.remove(pick)
-        return out, best
-
-    order: list[Entry] = []
     tiers: list[list[Entry]] = []
     remaining = by_score
     while remaining:
-        tier, top = tier_of(remaining)
-        if not tiers:
-            best = top
-        tiers.append(tier)
-        order += tier
-        remaining = [e for e in remaining if e not in tier]
+        # a tie group: the best remaining score and the entries after it in score order, down
+        # to the first one significantly below it (so groups never interleave by score)
+        top = remaining[0]
+        group = [top]
+        for e in remaining[1:]:
+            if head(e) < head(top) and below(top, e):
+                break
+            group.append(e)
+        left = sorted(group, key=lambda e: (tie(e), -head(e), e.name))
+        ordered = []
+        while left:
+            pick = next(
+                (
+                    e
+                    for e in left
+                    if not any(head(o) > head(e) and below(o, e) for o in left if o is not e)
+                ),
+                left[0],
+            )
+            ordered.append(pick)
+            left.remove(pick)
+        tiers.append(ordered)
+        remaining = remaining[len(group) :]
+    order = [e for t in tiers for e in t]
     tied = tiers[0]
+    best = [e for e in tied if head(e) == head(by_score[0])]
     first_of = {e.name: order.index(t[0]) + 1 for t in tiers for e in t if len(t) > 1}
+    group_of = {e.name: i for i, t in enumerate(tiers) for e in t}
     leader = order[0]
     rows = []
     for i, e in enumerate(order):
         m = _ownship(e, sid)
-        above = None if i == 0 else _diff(paired.get(order[i - 1], e, sid)[HEADLINE_METRIC])
-        vs_leader = None if i == 0 else _diff(paired.get(leader, e, sid)[HEADLINE_METRIC])
+        above = None if i == 0 else _diff(sp.diff(order[i - 1], e, sid))
+        vs_leader = None if i == 0 else _diff(sp.diff(leader, e, sid))
         rows.append(
             {
                 "entry": e.name,
                 "group": e.sub.group,
                 "rank": i + 1,
+                "shared_rank": order.index(tiers[group_of[e.name]][0]) + 1,
+                "tie_group": group_of[e.name],
+                "tie_group_size": len(tiers[group_of[e.name]]),
                 "tied_with": first_of.get(e.name) if first_of.get(e.name) != i + 1 else None,
-                "headline": _metric(m.get(HEADLINE_METRIC)),
+                "headline": score[e.name],
+                "shown_seed": _metric(m.get(HEADLINE_METRIC)),
                 "tie_break": _metric(m.get(TIE_BREAK)),
                 "vs_above": above,
                 "vs_leader": vs_leader,
@@ -372,7 +487,21 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
     outside = [e for e in order if e not in tied]
     runner_up = outside[0] if outside else None
     base = next((e for e in entries if e.name == BASELINE), None)
-    learned = [e for e in order if e.sub.group == "learned"]
+
+    def vs_base(group: str) -> list[dict[str, Any]]:
+        if base is None:
+            return []
+        rows = [
+            {"entry": e.name, **_diff(sp.diff(base, e, sid)), "p": sp.diff(base, e, sid)["p"]}
+            for e in order
+            if e.sub.group == group
+        ]
+        # "k of the n entries are above / below the baseline" combines n tests: Holm
+        for r, p in zip(rows, holm([r["p"] for r in rows]), strict=True):
+            r["p_holm"] = p
+            r["significant_holm"] = bool(p < ALPHA)
+        return rows
+
     return {
         "scenario": sid,
         "metric": HEADLINE_METRIC,
@@ -385,13 +514,10 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
         "runner_up": None if runner_up is None else runner_up.name,
         "gap": None
         if runner_up is None
-        else {"from": best[0].name, **_diff(paired.get(best[0], runner_up, sid)[HEADLINE_METRIC])},
+        else {"from": best[0].name, **_diff(sp.diff(best[0], runner_up, sid))},
         "baseline": None if base is None else base.name,
-        "learned_vs_baseline": []
-        if base is None
-        else [
-            {"entry": e.name, **_diff(paired.get(base, e, sid)[HEADLINE_METRIC])} for e in learned
-        ],
+        "learned_vs_baseline": vs_base("learned"),
+        "hybrid_vs_baseline": vs_base("hybrid"),
     }
 
 
@@ -586,12 +712,14 @@ def seed_aggregates(
     headline: str,
     comparators: tuple[str, ...],
     fixed: dict[str, bool],
+    paired: SeedPaired,
 ) -> dict[str, Any]:
     """Aggregates over training seeds (:mod:`cdr_bench.evaluate.aggregate`, rliable's
-    recommendations): per entry the headline score of every seed, its interquartile mean with a
-    stratified-bootstrap interval (none for one run), the IQM over the tasks (every scenario
-    all entries share but fixed encounters), and the probability of improvement over each
-    comparator on those tasks."""
+    recommendations with the episode noise added): per entry the headline score of every seed,
+    the ranked score over its units (mean up to four, IQM beyond; seeds sharing a parent are one
+    unit) with its two-level interval (:meth:`SeedPaired.score`), the IQM over the tasks (every
+    scenario all entries share but fixed encounters; two-level stratified interval), and the
+    probability of improvement over each comparator on those tasks (two-level interval)."""
     by_name = {e.name: e for e in entries}
     tasks = [
         s["id"]
@@ -599,6 +727,17 @@ def seed_aggregates(
         if all(e.scenario(s["id"]) is not None for e in entries) and not fixed[s["id"]]
     ]
     comps = [c for c in comparators if c in by_name]
+
+    def task_units(e: Entry) -> list[aggregate.Units]:
+        units = _units(e)
+        out = []
+        for sid in tasks:
+            out.append(
+                [[int(r.scenario(sid)["metrics"]["ownship"][SEED_METRIC]["count"])  # type: ignore[index]
+                  for r in u] for u in units]
+            )  # fmt: skip
+        return out
+
     rows = []
     for name in order:
         e = by_name[name]
@@ -609,20 +748,23 @@ def seed_aggregates(
         for c in comps:
             if c == name:
                 continue
-            kc, nc = _seed_counts(by_name[c], tasks)
+            _, nc = _seed_counts(by_name[c], tasks)
             if nc != nt:
                 raise UserError(f"{e.path}: {nt} episodes per scenario, {c} has {nc}")
-            ci = aggregate.probability_of_improvement_interval(kt, kc)
-            poi[c] = {
-                "value": round(aggregate.probability_of_improvement(kt, kc), 6),
-                "ci95": None if ci is None else [round(v, 6) for v in ci],
-            }
+            value, ci = aggregate.probability_of_improvement_two_level(
+                task_units(e), task_units(by_name[c]), nt
+            )
+            poi[c] = {"value": round(value, 6), "ci95": [round(v, 6) for v in ci]}
+        sc = paired.score(e, headline)
+        head: dict[str, Any] = dict(aggregate.summary(kh, n))
+        head.update(score=sc["value"], ci95=sc["ci95"], aggregate=sc["aggregate"])
         rows.append(
             {
                 "entry": name,
                 "seeds": seeds,
-                "headline": aggregate.summary(kh, n),
-                "tasks": aggregate.summary(kt, nt),
+                "units": [[s for s, r in _runs(e) if any(r is x for x in u)] for u in _units(e)],
+                "headline": head,
+                "tasks": aggregate.summary(kt, nt, episodes=True),
                 "p_improvement": poi,
             }
         )
@@ -632,6 +774,7 @@ def seed_aggregates(
         "tasks": tasks,
         "comparators": comps,
         "resamples": aggregate.RESAMPLES,
+        "mean_up_to": aggregate.MEAN_UP_TO,
         "rows": rows,
     }
 
@@ -815,6 +958,7 @@ def build_data(
             ranking["scenario"],
             (BASELINE, reference),
             fixed_of,
+            paired.seeds,
         ),
         "claims": build_claims(
             {row: e for e in entries for row in e.sub.published_as},

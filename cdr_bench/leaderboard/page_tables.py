@@ -195,15 +195,14 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     rows: Rows = []
     for r in rk["rows"]:
         e = ent[r["entry"]]
-        tied = f" (tied with #{r['tied_with']})" if r.get("tied_with") else ""
         budget, seeds = fmt_budget(e["budget"])
         h, tb = r["headline"], r["tie_break"]
         rows.append(
             [
-                Cell(f"{r['rank']}{tied}", r["rank"]),
+                Cell(rank_label(r), r["rank"]),
                 Cell(md_text(e["display_name"]), e["display_name"]),
                 Cell(e["group"], e["group"]),
-                Cell(fmt_metric("rate", h), h["value"], r["rank"] == 1),
+                Cell(fmt_metric("rate", h) + _over_seeds(h), h["value"], r["rank"] == 1),
                 Cell(fmt_diff("rate", r["vs_above"]), (r["vs_above"] or {}).get("diff")),
                 Cell(fmt_metric("mean", tb), tb["value"]),
             ]
@@ -217,6 +216,25 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
             ]
         )
     return head, rows, [ent[r["entry"]]["group"] for r in rk["rows"]]
+
+
+def rank_label(r: dict[str, Any]) -> str:
+    """A ranking row's rank: ``3``, or ``2=`` for every member of a tie group (the group's
+    first position, shared)."""
+    shared = r.get("shared_rank", r["rank"])
+    return f"{shared}=" if r.get("tie_group_size", 1) > 1 else str(r["rank"])
+
+
+def _over_seeds(h: dict[str, Any]) -> str:
+    """How a ranked score aggregates the entry's runs: ``mean of 3 seeds``, ``IQM of 5
+    seeds``, ``3 seeds, one parent``; nothing for one run."""
+    seeds, units = h.get("seeds", 1), h.get("units", 1)
+    if seeds <= 1:
+        return ""
+    if units == 1:
+        return f", {seeds} seeds of one parent (one run)"
+    par = "" if units == seeds else f" ({units} independent)"
+    return f", {h.get('aggregate', 'mean')} of {seeds} seeds{par}"
 
 
 def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
@@ -234,13 +252,13 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         "entry",
         "seeds",
         f"clean success on {sc}, per seed",
-        f"IQM over seeds ({sc})",
+        f"ranked score over seeds ({sc})",
         f"IQM over seeds x {len(sd['tasks'])} scenarios",
         *[f"P(better than {label[c]})" for c in sd["comparators"]],
     ]
 
     def iv(m: dict[str, Any]) -> str:
-        return fmt_metric("rate", {"value": m["iqm"], "ci95": m["ci95"]})
+        return fmt_metric("rate", {"value": m.get("score", m["iqm"]), "ci95": m["ci95"]})
 
     rows: Rows = []
     for r in sd["rows"]:
@@ -249,9 +267,17 @@ def seeds_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         row = [
             Cell(str(rank[r["entry"]]), rank[r["entry"]]),
             Cell(md_text(ent[r["entry"]]["display_name"]), ent[r["entry"]]["display_name"]),
-            Cell(str(h["runs"]), h["runs"]),
+            Cell(
+                str(h["runs"])
+                + (
+                    ""
+                    if len(r.get("units", [])) in (0, h["runs"])
+                    else f" ({len(r['units'])} independent: shared parent)"
+                ),
+                h["runs"],
+            ),
             Cell(per if h["runs"] > 1 else f"{per} (one run)", h["min"]),
-            Cell(iv(h), h["iqm"]),
+            Cell(f"{iv(h)} ({h.get('aggregate', 'IQM')})", h.get("score", h["iqm"])),
             Cell(iv(t), t["iqm"]),
         ]
         for c in sd["comparators"]:

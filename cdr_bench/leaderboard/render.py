@@ -29,6 +29,7 @@ from cdr_bench.leaderboard.page_tables import (
     html_table,
     inline_md,
     published_table,
+    rank_label,
     ranking_table,
     scenario_table,
     seeds_table,
@@ -59,20 +60,28 @@ INTRO = (
 
 HEADLINE_NOTE = (
     "**Headline score: clean success on `{sc}`** — the share of episodes in which the ownship "
-    "reaches its goal with no loss of separation at all (95 % Wilson interval). Success alone "
-    "does not separate the agents (an agent that flies through a LoS still succeeds, and on "
-    "`{sc}` even one that never manoeuvres succeeds almost always); clean success counts the "
-    "episodes a controller would accept and cannot be improved by failing. The entries with "
-    "the top score and those whose paired difference from one of them is not significant (95 % "
-    "paired bootstrap on the same episodes) are statistically tied and ordered by extra path "
-    "(km flown beyond the direct route by successful flights, lower first; never above a tied "
-    "entry with a significantly higher score); the same rule then ranks the others, tier by "
-    "tier (#k in the rank column: tied with the entry ranked k). "
+    "reaches its goal with no loss of separation at all, over the entry's training seeds: the "
+    "mean of its seeds (up to four) or their interquartile mean (IQM, more than four), seeds "
+    "that share a parent (trained on from one run) counted as one; a scripted entry is one run. "
+    "Its 95 % interval is a two-level bootstrap: the seeds resampled, then the episodes of each "
+    "resampled seed's run, so it holds the episode noise as well as the seed spread. Success "
+    "alone does not separate the agents (an agent that flies through a LoS still succeeds, and "
+    "on `{sc}` even one that never manoeuvres succeeds almost always); clean success counts the "
+    "episodes a controller would accept and cannot be improved by failing. Paired differences "
+    "average the per-episode difference over the seeds (every run flies the same episodes), "
+    "with the same two-level bootstrap (seeds of each side, then the episodes, jointly for "
+    "every run). A tie group: the best remaining score and the entries after it in score "
+    "order, down to the first one significantly below it; it shares a rank (`2=`) and is "
+    "ordered by extra path (km flown beyond the direct route by successful flights, lower "
+    "first; never above a member with a significantly higher score). Between groups the order "
+    "is strictly by score. "
     '"vs row above": the paired difference from the entry ranked just above, in points, '
-    "{down} when significant. Beside it the paper's five metrics on `{sc}` (success, LoS, NMAC, "
-    "timeout, steps of successful episodes) and the training budget (transitions and seeds, "
-    "from the entry's training logs; `-` for scripted agents). Efficiency (steps, extra path) "
-    "is comparable only among agents that succeed equally often."
+    "{down} when significant. Beside it, from the seed each entry shows (its `checkpoint`), "
+    "the extra path and the paper's five metrics on `{sc}` (success, LoS, NMAC, timeout, steps "
+    "of successful episodes), and the training budget (transitions and seeds, from the entry's "
+    "training logs; `-` for scripted agents). Groups: scripted, learned (learns from scratch), "
+    "hybrid (MVP with a learned override), ablation. Efficiency (steps, extra path) is "
+    "comparable only among agents that succeed equally often."
 )
 
 TACTICAL_NOTE = (
@@ -85,16 +94,18 @@ TACTICAL_NOTE = (
 
 SEEDS_NOTE = (
     "Training seeds, aggregated as Agarwal et al. (2021) recommend (the `rliable` "
-    "methods): each seed's checkpoint is scored on the same episodes; the interquartile mean "
-    "(IQM: the mean of the middle half of the seeds' scores) of the clean success, with a 95 % "
-    "stratified-bootstrap interval over seeds ({reps:,} resamples; the runs resampled within "
-    "each scenario); the same over every (seed, scenario) of the {ntasks} scenarios "
-    "{tasks}; and the probability of improvement P(X > Y) on those scenarios: the chance that "
-    "a random seed of the entry scores above a random seed of the comparator, averaged over "
-    "the scenarios (ties count one half; 0.5: no difference). A scripted agent is one run; an "
-    "entry trained once shows no interval over seeds (a single run is not a sample of "
-    "training). The ranking above and the per-scenario tables show one seed per entry (its "
-    "`checkpoint`)."
+    "methods, with the episode noise added): each seed's checkpoint is scored on the same "
+    "episodes; the ranked score of the clean success (the mean of the seeds up to {mean_up_to}, "
+    "the interquartile mean, IQM, beyond; seeds that share a parent count as one), with a 95 % "
+    "two-level bootstrap interval ({reps:,} resamples: the seeds resampled, then the episodes "
+    "of each resampled seed's run); the IQM over every (seed, scenario) of the {ntasks} "
+    "scenarios {tasks} (runs resampled within each scenario, then their episodes; seeds that "
+    "share a parent are counted separately here); and the probability of improvement P(X > Y) "
+    "on those scenarios: the chance that a random seed (or parent) of the entry scores above "
+    "one of the comparator, averaged over the scenarios (ties count one half; 0.5: no "
+    "difference), with the same two-level interval, so against a single run it still carries "
+    "the episode noise. A scripted agent is one run. The per-scenario tables show one seed per "
+    "entry (its `checkpoint`)."
 )
 
 CLAIMS_NOTE = (
@@ -102,12 +113,18 @@ CLAIMS_NOTE = (
     "that decides it (fixed in `cdr_bench/leaderboard/claims.py` before the numbers). The "
     "paper's numbers come from its own simulator, so a number outside our interval says that "
     "this benchmark does not reproduce it, not that the paper mis-measured its own. Measured on "
-    "the seed each entry shows; reduced budgets are named."
+    "the seed each entry shows (the ablations' probability of improvement: over every seed); "
+    "reduced budgets are named. A yes/no outcome per episode (success, LoS, NMAC) is tested "
+    "with McNemar's exact test on the discordant episodes (p and A+/B- / A-/B+ counts), the "
+    "same numbers as `cdr-bench compare`; a statement that combines several tests (better "
+    "than each baseline) is Holm-corrected; a test with too few discordant episodes to reject "
+    'even if all fell one way is **not measurable**, not "not held".'
 )
 
 GROUP_LABEL = {
     "scripted": "scripted",
     "learned": "learned",
+    "hybrid": "hybrid (MVP + learned)",
     "ablation": "ablation",
     "published": "published (paper)",
 }
@@ -117,6 +134,7 @@ def _seeds_note(data: dict[str, Any]) -> str:
     sd = data["seeds"]
     return SEEDS_NOTE.format(
         reps=sd["resamples"],
+        mean_up_to=sd.get("mean_up_to", 4),
         ntasks=len(sd["tasks"]),
         tasks=", ".join(f"`{t}`" for t in sd["tasks"]),
     )
@@ -163,6 +181,43 @@ def _pp(d: dict[str, Any], sign: float = 1.0) -> str:
     return f"{f(sign * d['diff'])} points [{f(a)}, {f(b)}]"
 
 
+def _vs_baseline(data: dict[str, Any], vs: list[dict[str, Any]], what: str) -> str:
+    """One paragraph: how the entries of one group (``vs``: their paired differences from the
+    baseline over seeds, in ranking order) compare with the baseline; '' without any."""
+    rk = data["ranking"]
+    base = rk["baseline"]
+    if base is None or not vs:
+        return ""
+    names = _names(data)
+    rows = {r["entry"]: r for r in rk["rows"]}
+    sig = {v["entry"]: v.get("significant_holm", v["significant"]) for v in vs}
+    better = [v["entry"] for v in vs if sig[v["entry"]] and v["diff"] > 0]
+    worse = [v["entry"] for v in vs if sig[v["entry"]] and v["diff"] < 0]
+    same = [v["entry"] for v in vs if not sig[v["entry"]]]
+    best = vs[0]
+    parts = []
+    for label, group in (
+        ("significantly above", better),
+        ("not significantly different from", same),
+        ("significantly below", worse),
+    ):
+        if group:
+            verb = "is" if len(group) == 1 else "are"
+            who = ", ".join(names[g] for g in group)
+            parts.append(f"{len(group)} {verb} {label} it ({who})")
+    one = len(vs) == 1
+    label = what.format(s="" if one else "s", v="s" if one else "", base=names[base])
+    return (
+        f"Against {names[base]} (scripted resolver, rank {rank_label(rows[base])}, "
+        f"{_pct(rows[base]['headline'])}), of the {len(vs)} {label} "
+        + "; ".join(parts)
+        + f". The best of them, {names[best['entry']]} (rank {rank_label(rows[best['entry']])}), "
+        f"differs from {names[base]} by {_pp(best)} (paired, averaged over seeds). "
+        f"Each is tested against {names[base]} (two-sided bootstrap p-value of the paired "
+        f"difference), Holm-corrected over the {len(vs)} tests at 5 %."
+    )
+
+
 def conclusion(data: dict[str, Any]) -> list[str]:
     """The generated conclusion (Markdown paragraphs): who ranks first on the headline score,
     whether the gap is significant, how the learned agents compare with the baseline."""
@@ -173,10 +228,20 @@ def conclusion(data: dict[str, Any]) -> list[str]:
     lead = rows[rk["leader"]]
     n = next(t["episodes"] for t in data["tables"] if t["scenario"] == rk["scenario"])
     out = []
+    lh = lead["headline"]
+    if lh.get("seeds", 1) <= 1:
+        over = "one run"
+    elif lh["units"] == 1:
+        over = f"mean of {lh['seeds']} seeds that share one parent, counted as one run"
+    else:
+        over = f"{lh['aggregate']} over {lh['seeds']} seeds"
+    kind = {"hybrid": "a hybrid built on MVP", "learned": "a learned agent"}.get(
+        lead["group"], f"a {lead['group']} entry"
+    )
     first = (
-        f"**{names[rk['leader']]}** ranks first on the headline score, "
-        f"{header[rk['metric']]} on `{rk['scenario']}`: {_pct(lead['headline'])} "
-        f"({n} episodes)."
+        f"**{names[rk['leader']]}** ({kind}) ranks first on the headline score, "
+        f"{header[rk['metric']]} on `{rk['scenario']}`: {_pct(lh)} ({over}, {n} episodes; "
+        "95 % two-level bootstrap over seeds and episodes)."
     )
     tied = [t for t in rk["tied"] if t != rk["leader"]]
     if tied:
@@ -186,9 +251,9 @@ def conclusion(data: dict[str, Any]) -> list[str]:
         )
         others = ", ".join(f"{names[t]} ({_pct(rows[t]['headline'])})" for t in tied)
         first += (
-            f" Its lead is not significant: statistically tied with it (paired difference from "
-            f"the top score not significant) are {others}; the tie is broken by extra path "
-            f"({tb})."
+            f" Its lead is not significant: in its tie group (the entries after it in score "
+            f"order, down to the first one significantly below it) are {others}; the group is "
+            f"ordered by extra path ({tb})."
         )
     if rk["runner_up"] is not None and rk["gap"] is not None:
         ru, gap = rk["runner_up"], rk["gap"]
@@ -203,33 +268,15 @@ def conclusion(data: dict[str, Any]) -> list[str]:
                 f" Its lead over the runner-up, {names[ru]} ({_pct(rows[ru]['headline'])}), "
                 f"is significant: {_pp(gap)}"
             )
-        first += " (95 % paired bootstrap on the same episodes)."
+        first += " (95 % paired bootstrap on the same episodes, averaged over seeds)."
     out.append(first)
-    base = rk["baseline"]
-    vs = rk["learned_vs_baseline"]
-    if base is not None and vs:
-        better = [v["entry"] for v in vs if v["significant"] and v["diff"] > 0]
-        worse = [v["entry"] for v in vs if v["significant"] and v["diff"] < 0]
-        same = [v["entry"] for v in vs if not v["significant"]]
-        best = vs[0]  # learned entries in ranking order
-        parts = []
-        for label, group in (
-            ("significantly above", better),
-            ("not significantly different from", same),
-            ("significantly below", worse),
-        ):
-            if group:
-                verb = "is" if len(group) == 1 else "are"
-                who = ", ".join(names[g] for g in group)
-                parts.append(f"{len(group)} {verb} {label} it ({who})")
-        n_learned = f"{len(vs)} learned agent" + ("" if len(vs) == 1 else "s")
-        out.append(
-            f"Against {names[base]} (scripted resolver, rank {rows[base]['rank']}, "
-            f"{_pct(rows[base]['headline'])}), of the {n_learned} "
-            + "; ".join(parts)
-            + f". The best learned agent, {names[best['entry']]} (rank "
-            f"{rows[best['entry']]['rank']}), differs from {names[base]} by {_pp(best)}."
-        )
+    for group, what in (
+        ("learned", "learned agent{s} that learn{v} from scratch"),
+        ("hybrid", "hybrid{s} built on {base} ({base} with a learned override)"),
+    ):
+        para = _vs_baseline(data, rk.get(f"{group}_vs_baseline", []), what)
+        if para:
+            out.append(para)
     succ = {r["entry"]: r["metrics"]["success_rate"]["value"] for r in rk["rows"]}
     learned = [succ[r["entry"]] for r in rk["rows"] if r["group"] == "learned"]
     if "direct" in succ and learned and succ["direct"] is not None:

@@ -18,7 +18,9 @@ Example (``leaderboard/submissions/mvp.yaml``)::
 
 A learned entry also names its training logs (``training_logs``: one JSON-lines log per seed;
 the budget and seed columns and the learning curves are read from them) and, when it is an
-ablation of another entry, ``group: ablation``.
+ablation of another entry, ``group: ablation``; a scripted resolver with a learned part
+(MVP with a learned override) is ``group: hybrid``, ranked and summarised apart from the agents
+that learn from scratch.
 
 An entry trained with several seeds lists them all (``seeds``), each with its checkpoint and log;
 ``checkpoint`` names the seed whose episodes the per-episode views show (replays, multimodality,
@@ -64,7 +66,7 @@ from cdr_bench.leaderboard import text as tx
 from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_problem
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
-GROUPS = ("scripted", "learned", "ablation")
+GROUPS = ("scripted", "learned", "hybrid", "ablation")
 """Groups of measured entries, in display order (the paper's numbers are a fourth group,
 ``published``, never measured here)."""
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
@@ -142,6 +144,10 @@ class Seed:
     seed: int
     checkpoint: str
     training_log: str
+    parent: str | None = None
+    """The run this seed continued from, when it is not trained from scratch (``mvp-improve
+    seed 1``): seeds with the same parent are not independent and are counted as one unit in
+    the aggregates over seeds."""
 
 
 @dataclass(frozen=True)
@@ -174,7 +180,9 @@ class Submission:
     multimodality: tuple[str, ...]
     """Scenarios for ``cdr-bench multimodal`` (first-action distributions)."""
     group: str = "scripted"
-    """One of :data:`GROUPS`: ``scripted`` (no training), ``learned`` or ``ablation``."""
+    """One of :data:`GROUPS`: ``scripted`` (no training), ``learned`` (learns from scratch),
+    ``hybrid`` (a scripted resolver with a learned part, e.g. MVP with a learned override) or
+    ``ablation``."""
     training_logs: tuple[str, ...] = ()
     """JSON-lines training logs (repository paths), one per seed; each ends in a ``final``
     line whose ``step`` is the transitions trained."""
@@ -326,9 +334,10 @@ FIELDS: dict[str, tuple[bool, str]] = {
     ),
     "seeds": (
         False,
-        "every training seed: a list of {seed: K, checkpoint: FILE, training_log: FILE.jsonl}; "
-        "`checkpoint` is one of them (the seed the per-episode views show), `training_logs` is "
-        "then not given",
+        "every training seed: a list of {seed: K, checkpoint: FILE, training_log: FILE.jsonl} "
+        "with an optional `parent: RUN` (the run a seed continued from; seeds with the same "
+        "parent count as one in the aggregates over seeds); `checkpoint` is one of them (the "
+        "seed the per-episode views show), `training_logs` is then not given",
     ),
 }
 """Every key of a submission file: ``name -> (required, meaning)``."""
@@ -564,11 +573,16 @@ def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
     out: list[Seed] = []
     for i, item in enumerate(v):
         f = f"seeds[{i}]"
-        if not isinstance(item, dict) or set(item) != {"seed", "checkpoint", "training_log"}:
+        if not isinstance(item, dict) or not (
+            {"seed", "checkpoint", "training_log"}
+            <= set(item)
+            <= {"seed", "checkpoint", "training_log", "parent"}
+        ):
             raise SubmissionError(
                 src,
                 f,
-                f"expected {{seed: K, checkpoint: FILE, training_log: FILE.jsonl}}, got {item!r}",
+                "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl} "
+                f"(and optionally parent: RUN), got {item!r}",
             )
         k = item["seed"]
         if not isinstance(k, int) or isinstance(k, bool) or k < 0:
@@ -586,7 +600,8 @@ def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
         full = _repo_path(src, f"{f}.training_log", log, root)
         if not full.is_file() or full.suffix != ".jsonl":
             raise SubmissionError(src, f"{f}.training_log", f"expected a .jsonl file, got {log}")
-        out.append(Seed(k, ck, log))
+        parent = _str(src, f"{f}.parent", item.get("parent"), allow_none=True)
+        out.append(Seed(k, ck, log, parent))
     for key in ("seed", "checkpoint", "training_log"):
         vals = [getattr(s, key) for s in out]
         if len(set(vals)) != len(vals):

@@ -221,7 +221,7 @@ def test_compare_paired_and_refuses_other_episodes(cdr, tmp_path):
     a, b, c = tmp_path / "a.json", tmp_path / "b.json", tmp_path / "c.json"
     assert evaluate(cdr, AGENTS / "direct", a, episodes=12).returncode == 0
     assert evaluate(cdr, AGENTS / "mvp", b, episodes=12).returncode == 0
-    assert evaluate(cdr, AGENTS / "mvp", c, "--seed", 1, episodes=12).returncode == 0
+    assert evaluate(cdr, AGENTS / "mvp", c, "--seed", 2, episodes=12).returncode == 0
     r = cdr("compare", a, b, "--json", tmp_path / "cmp.json")
     assert r.returncode == 0, r.stderr
     assert "los_rate" in r.stdout and "B-A" in r.stdout
@@ -499,6 +499,32 @@ def test_compare_on_the_scenarios_both_results_hold(cdr, tmp_path):
     assert "compared on medium only" in r.stderr and "medium" in r.stdout and "low" not in r.stdout
     r = cdr("compare", one, two, "--scenario", "low")
     assert r.returncode == 2 and "--scenario low: not in" in r.stderr
+
+
+def test_compare_interval_does_not_depend_on_the_other_scenarios(cdr, tmp_path):
+    """A scenario's resampled episodes are seeded from its id: compare on {medium} and on
+    {low, medium} give identical medium rows (the leaderboard compares other subsets)."""
+    from cdr_bench.evaluate.compare import compare, mcnemar_exact
+
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    for agent, out in (("direct", a), ("random", b)):
+        r = cdr(
+            "evaluate", AGENTS / agent, "--scenario", "low", "--scenario", "medium",
+            "--episodes", 12, "--out", out, "--no-progress",
+        )  # fmt: skip
+        assert r.returncode == 0, r.stderr
+    one = compare(a, b, ["medium"])["rows"]
+    both = [r for r in compare(a, b, ["low", "medium"])["rows"] if r["scenario"] == "medium"]
+    rev = [r for r in compare(a, b, ["medium", "low"])["rows"] if r["scenario"] == "medium"]
+    assert one == both == rev
+    clean = next(
+        r for r in one if r["metric"] == "clean_success_rate" and r["aircraft"] == "ownship"
+    )
+    mc = clean["mcnemar"]
+    assert mc["p"] == mcnemar_exact(mc["b"], mc["c"])
+    assert (mc["c"] - mc["b"]) / 12 == pytest.approx(clean["diff"])
+    r = cdr("compare", a, b, "--scenario", "medium")
+    assert r.returncode == 0 and "McNemar p" in r.stdout
 
 
 @pytest.mark.parametrize(

@@ -51,7 +51,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
         assert heads[0] > heads[1]
     assert readme.index("## In one minute") < readme.index("## Ranking: clean success on high")
     top = next(e["display_name"] for e in data["entries"] if e["name"] == rk["leader"])
-    assert f"**{top}** ranks first on the headline score" in readme
+    assert f"**{top}** (" in readme and ") ranks first on the headline score" in readme
     # the best value of a marked column is bold on the row that holds it; never on steps
     for key in ("success_rate", "los_rate"):
         for name in low["best"][key]:
@@ -326,11 +326,17 @@ def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> No
     rows = {r["entry"]: r for r in data["seeds"]["rows"]}
     w, d = rows["weave"], rows["direct"]
     assert w["seeds"] == [1, 2] and w["headline"]["runs"] == 2
-    assert d["seeds"] == [None] and d["headline"]["ci95"] is None  # one run: no interval
+    assert d["seeds"] == [None] and d["headline"]["aggregate"] == "one run"
+    lo, hi = d["headline"]["ci95"]  # one run: its episode interval, never zero-width
+    assert lo < d["headline"]["score"] < hi or 0.0 in (lo, hi) or 1.0 in (lo, hi)
+    assert w["headline"]["aggregate"] == "mean" and w["units"] == [[1], [2]]
     hi = {s["id"]: s for s in one["scenarios"]}["high"]["metrics"]["ownship"]
     hi2 = {s["id"]: s for s in two["scenarios"]}["high"]["metrics"]["ownship"]
     per = [hi["clean_success_rate"]["value"], hi2["clean_success_rate"]["value"]]
     assert w["headline"]["per_run"] == per
+    assert w["headline"]["score"] == pytest.approx(sum(per) / 2)  # the ranked score: the mean
+    ranked = {r["entry"]: r for r in data["ranking"]["rows"]}["weave"]["headline"]
+    assert ranked["value"] == w["headline"]["score"] and ranked["seeds"] == 2
     assert w["headline"]["iqm"] == pytest.approx(sum(per) / 2)  # 2 runs: nothing trimmed
     assert "## Seeds" in (lb / "README.md").read_text()
     assert 'id="table-seeds"' in (lb / "index.html").read_text()

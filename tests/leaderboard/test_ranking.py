@@ -169,6 +169,14 @@ def test_ranked_by_headline_with_ties_broken_by_extra_path(data: dict[str, Any])
     assert [r["rank"] for r in high["rows"]] == [1, 2, 3, 4, 5]
     vs = {v["entry"]: v for v in rk["learned_vs_baseline"]}
     assert not vs["alpha"]["significant"] and vs["beta"]["significant"]
+    # a tie group shares its first position; between groups strictly by score
+    assert [r["shared_rank"] for r in rk["rows"]] == [1, 1, 3, 4, 5]
+    assert rows["alpha"]["headline"]["aggregate"] == "one run"
+    lo, hi = rows["alpha"]["headline"]["ci95"]
+    assert lo < rows["alpha"]["headline"]["value"] < hi  # one run: episode noise, never 0-wide
+    for g, nxt in zip(rk["tiers"], rk["tiers"][1:], strict=False):
+        low = min(rows[e]["headline"]["value"] for e in g)
+        assert all(rows[e]["headline"]["value"] <= low for e in nxt)
 
 
 def test_no_best_mark_on_a_metric_that_rewards_failing(data: dict[str, Any]) -> None:
@@ -186,15 +194,22 @@ def test_no_best_mark_on_a_metric_that_rewards_failing(data: dict[str, Any]) -> 
 
 def test_conclusion_names_leader_tie_significance_and_baseline(data: dict[str, Any]) -> None:
     text = " ".join(conclusion(data))
-    assert text.startswith("**Alpha** ranks first on the headline score, clean success on `high`")
-    assert "Its lead is not significant: statistically tied with it" in text
-    assert "the tie is broken by extra path (Alpha 1.00 km, Mvp 2.00 km)" in text
+    assert text.startswith(
+        "**Alpha** (a learned agent) ranks first on the headline score, clean success on `high`"
+    )
+    assert "(one run, 300 episodes; 95 % two-level bootstrap" in text
+    assert "Its lead is not significant: in its tie group" in text
+    assert "the group is ordered by extra path (Alpha 1.00 km, Mvp 2.00 km)" in text
     assert "Every other entry is significantly below the top score: the best of them, Beta" in (
         text
     )
     assert "against Mvp (95 % paired bootstrap" in text
-    assert "of the 2 learned agents 1 is not significantly different from it (Alpha)" in text
+    assert (
+        "of the 2 learned agents that learn from scratch 1 is not significantly different from "
+        "it (Alpha)"
+    ) in text
     assert "; 1 is significantly below it (Beta)" in text
+    assert "Holm-corrected over the 2 tests" in text
     assert "Direct, which never manoeuvres, succeeds in 100.0%" in text
 
 
