@@ -4,15 +4,16 @@
 #   PYTHON=.venv/bin/python bash agents/train_baselines.sh [BUDGET] [NAME ...]
 #
 # BUDGET defaults to 1374560 environment transitions, the length of the Diffusion-AC reference
-# run (agents/diffusion_ac/training_log.jsonl); NAME defaults to every baseline. Each baseline is
-# trained as in the paper (§5.2): without the DPSC curriculum, on the medium scenario (the same
+# run (agents/diffusion_ac/training_log.jsonl.xz); NAME defaults to every baseline. Each baseline
+# is trained as in the paper (§5.2): without the DPSC curriculum, on the medium scenario (the same
 # condition as the W/O-DPSC ablation of Diffusion-AC), width 128, gamma 0.99, seed 1, with the
 # hyper-parameters chosen by the short tuning recorded in agents/BASELINES.md. The run goes to
-# runs/baselines/<name>-final/; its checkpoint (weights only), log, curve and arguments are copied
-# into agents/<dir>/, which is timed with cdr-bench latency. Finally the leaderboard build scores
-# the trained baselines (their entries have the same names) on the paper suite, each in its own
-# sandboxed process, into leaderboard/results/<name>.json|.jsonl - the one committed copy of
-# each evaluation - and re-renders the leaderboard and the docs' results tables.
+# runs/baselines/<name>-final/; its checkpoint (weights only), log (xz-compressed, as
+# training_log.jsonl.xz), curve and arguments are copied into agents/<dir>/, which is timed with
+# cdr-bench latency. Finally the leaderboard build scores the trained baselines (their entries
+# have the same names) on the paper suite, each in its own sandboxed process, into
+# leaderboard/results/<name>.json|.jsonl.xz - the one committed copy of each evaluation - and
+# re-renders the leaderboard and the docs' results tables.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${1:-1374560}
@@ -36,7 +37,10 @@ for name in "${names[@]}"; do
         --no-curriculum --scenario medium --no-progress "${flags[@]}" > "$run.out" 2>&1
     ag=agents/$dir
     cp "$run/checkpoint.pt" "$ag/checkpoint.pt"
-    cp "$run/log.jsonl" "$ag/training_log.jsonl"
+    "$py" -c 'import sys, pathlib; from cdr_bench.evaluate.results import compress_log, log_text
+pathlib.Path(sys.argv[2]).write_bytes(compress_log(log_text(sys.argv[1], "training log")))' \
+        "$run/log.jsonl" "$ag/training_log.jsonl.xz"
+    rm -f "$ag/training_log.jsonl"
     cp "$run/args.json" "$ag/train_args.json"
     [ -f "$run/curve.png" ] && cp "$run/curve.png" "$ag/curve.png"
     mkdir -p "$ag/analysis"

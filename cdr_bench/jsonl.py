@@ -1,16 +1,18 @@
-"""JSON-lines files kept either plain (``X.jsonl``) or gzip-compressed (``X.jsonl.gz``).
+"""JSON-lines files kept plain (``X.jsonl``), gzip-compressed (``X.jsonl.gz``) or
+xz-compressed (``X.jsonl.xz``).
 
 The repository keeps the logs and per-episode files of finished runs (``sweeps/landed/``, the
-``analysis/``, ``tuning/`` and ``ablations/`` folders of ``agents/``) compressed; the readers of
-those files (``cdr_bench.leaderboard.tables``, ``sweeps/*.py``) read them through
-:func:`read_jsonl`, which takes either name: ``X.jsonl`` is read as ``X.jsonl.gz`` when only
-that exists, and the other way round. Compressed files are written by :func:`gzip_file`
-deterministically (no file name, ``mtime=0`` in the header), so compressing the same bytes
-twice gives the same file.
+``analysis/``, ``tuning/`` and ``ablations/`` folders of ``agents/``) gzip-compressed; the readers
+of those files (``cdr_bench.leaderboard.tables``, ``sweeps/*.py``) read them through
+:func:`read_jsonl`, which takes any of the names: ``X.jsonl`` is read as ``X.jsonl.xz`` or
+``X.jsonl.gz`` when only that exists, and the other way round. Compressed files are written by
+:func:`gzip_file` deterministically (no file name, ``mtime=0`` in the header), so compressing
+the same bytes twice gives the same file.
 
-Training logs named by ``leaderboard/submissions/*.yaml`` and the leaderboard's result files
-stay plain: their readers (``cdr_bench.leaderboard.data``, ``cdr_bench.evaluate.results``) read
-``.jsonl`` only.
+The training logs named by ``leaderboard/submissions/*.yaml`` and the leaderboard's per-episode
+logs are xz (``X.jsonl.xz``), written and read by
+:func:`cdr_bench.evaluate.results.compress_log` and :func:`cdr_bench.evaluate.results.log_text`;
+:func:`read_bytes` reads an xz file through the latter.
 """
 
 from __future__ import annotations
@@ -24,22 +26,34 @@ from pathlib import Path
 from typing import Any
 
 GZ = ".gz"
+XZ = ".xz"
 
 
 def existing(path: str | os.PathLike[str]) -> Path:
-    """``path`` if it exists, else its other form (``X.jsonl`` <-> ``X.jsonl.gz``) if that
-    exists, else ``path`` unchanged (so that the caller's error names the file it was given)."""
+    """``path`` if it exists, else another form of it (``X.jsonl``, ``X.jsonl.xz``,
+    ``X.jsonl.gz``, in this order) if one exists, else ``path`` unchanged (so that the caller's
+    error names the file it was given)."""
     p = Path(path)
     if p.exists():
         return p
-    other = p.with_name(p.name[: -len(GZ)]) if p.name.endswith(GZ) else p.with_name(p.name + GZ)
-    return other if other.exists() else p
+    plain = p.name.removesuffix(GZ).removesuffix(XZ) if p.name.endswith((GZ, XZ)) else p.name
+    for name in (plain, plain + XZ, plain + GZ):
+        if name != p.name and p.with_name(name).exists():
+            return p.with_name(name)
+    return p
 
 
 def read_bytes(path: str | os.PathLike[str]) -> bytes:
-    """The content of ``path`` (or of its other form, :func:`existing`), decompressed when the
-    file is gzip. A damaged gzip file is an ``OSError`` naming it."""
+    """The content of ``path`` (or of another form of it, :func:`existing`), decompressed when
+    the file is gzip or xz (``X.xz``). A damaged compressed file is an ``OSError`` naming it."""
     p = existing(path)
+    if p.name.endswith(XZ):
+        from cdr_bench.evaluate.results import log_text
+
+        try:
+            return log_text(p, "JSON-lines file").encode("utf-8")
+        except ValueError as e:
+            raise OSError(str(e)) from None
     data = p.read_bytes()
     if data[:2] != b"\x1f\x8b":
         return data
@@ -55,7 +69,7 @@ def read_text(path: str | os.PathLike[str]) -> str:
 
 
 def read_jsonl(path: str | os.PathLike[str]) -> list[Any]:
-    """One JSON value per non-blank line of ``path`` (plain or gzip, either name)."""
+    """One JSON value per non-blank line of ``path`` (plain, gzip or xz, any name)."""
     return [json.loads(x) for x in read_text(path).splitlines() if x.strip()]
 
 
@@ -88,7 +102,7 @@ def gzip_file(
 
 
 def gunzip_file(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Path:
-    """Write the content of ``src`` (plain or gzip, either name) to ``dst``, plain (atomically).
+    """Write the content of ``src`` (plain, gzip or xz, any name) to ``dst``, plain (atomically).
     Returns ``dst``."""
     d = Path(dst)
     _atomic_write(d, read_bytes(src))

@@ -1,10 +1,11 @@
 """What a Diffusion-AC training log says about its last curriculum stage (issue 16, item 5).
 
-    python sweeps/stage_stats.py agents/diffusion_ac/training_log.jsonl \\
-        agents/diffusion_ac/seeds/*/training_log.jsonl [--stage 12] [--below 0.5] [--q-above 1.5]
+    python sweeps/stage_stats.py agents/diffusion_ac/training_log.jsonl.xz \\
+        agents/diffusion_ac/seeds/*/training_log.jsonl.xz [--stage 12] [--below 0.5] \\
+        [--q-above 1.5]
 
-A log may be plain or gzip (``log.jsonl.gz``, as kept in ``sweeps/landed/`` and
-``agents/*/analysis/``).
+A log may be plain, gzip (``log.jsonl.gz``, as kept in ``sweeps/landed/`` and
+``agents/*/analysis/``) or xz (``training_log.jsonl.xz``, as shipped into an agent folder).
 
 For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it prints:
 
@@ -112,7 +113,7 @@ def summarise(path: Path, stage: int, below: float, q_above: float = 1.5) -> str
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("logs", nargs="+", type=Path, help="training_log.jsonl / log.jsonl files")
+    ap.add_argument("logs", nargs="+", type=Path, help="training_log.jsonl[.xz] / log.jsonl files")
     ap.add_argument("--stage", type=int, default=12, help="curriculum stage (12)")
     ap.add_argument("--below", type=float, default=0.5, help="collapse threshold (0.5)")
     ap.add_argument(

@@ -19,7 +19,6 @@ too. Some commands' output is checked as well (the tutorials: ``CHECKS``).
 from __future__ import annotations
 
 import ast
-import gzip
 import importlib.util
 import json
 import math
@@ -295,12 +294,12 @@ def _needs_modules(*modules: str) -> Callable[[Callable], Callable]:
 
 
 def _episodes(path: Path) -> list[dict]:
-    for name in (path.name + ".jsonl.gz", path.name + ".jsonl"):
+    from cdr_bench.evaluate.results import log_text
+
+    for name in (path.name + ".jsonl.xz", path.name + ".jsonl.gz", path.name + ".jsonl"):
         p = path.with_name(name)
         if p.is_file():
-            opener = gzip.open if name.endswith(".gz") else open
-            with opener(p, "rt") as f:
-                return [json.loads(line) for line in f if line.strip()]
+            return [json.loads(line) for line in log_text(p).splitlines() if line.strip()]
     raise AssertionError(f"no per-episode file beside {path}")
 
 

@@ -7,13 +7,13 @@
 # With no argument all three parts run. Outputs (all deterministic for a given checkpoint):
 #   main       leaderboard/results/diffusion-ac.json|.jsonl (checkpoint.pt on the paper suite,
 #              1000 episodes each) and diffusion-ac.multimodal-<scenario>.json (Fig. 9)
-#   ablations  leaderboard/results/diffusion-ac-no-<part>.json|.jsonl and .seed-<k>.* (the
+#   ablations  leaderboard/results/diffusion-ac-no-<part>.json|.jsonl.xz and .seed-<k>.* (the
 #              Table-3 ablations at the reference budget, ablations/<part>/ and its seeds/, on
 #              the paper suite; the complete method is the main entry)
 #   analysis   analysis/latency.json (cdr-bench latency), and analysis/sample-target/: the
 #              reference-budget run of --diffusion-target sample (sweeps/dac-sample.yaml, staged
 #              in sweeps/landed/dac-sample/) on the paper suite (result.json, its per-episode
-#              file kept compressed as result.jsonl.gz) and its multimodality on the tactical
+#              file result.jsonl.xz) and its multimodality on the tactical
 #              families (multimodal-<scenario>.json|.png)
 # The leaderboard build also re-renders the leaderboard and every results table in the docs
 # (README.md, agents/BASELINES.md, agents/diffusion_ac/README.md).
@@ -37,7 +37,6 @@ for part in "${parts[@]}"; do
             ck=sweeps/landed/dac-sample/ab0ea5d749fdcfa2/checkpoint.pt  # its one trial
             CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag --no-progress --force \
                 --out $st/result.json
-            gzip -9nf $st/result.jsonl  # deterministic (no name, no time); read as it is
             for sc in head-on crossing overtaking; do
                 CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench multimodal $ag --search \
                     --scenario tactical/$sc --out $st/multimodal-tactical_$sc.json

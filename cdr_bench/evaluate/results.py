@@ -1,4 +1,4 @@
-"""Result files: a JSON of provenance per run and a per-episode log of facts beside it (gzip
+"""Result files: a JSON of provenance per run and a per-episode log of facts beside it (xz
 JSONL), both written atomically (temporary file + ``os.replace``), and the partial checkpoint
 used by ``--resume``.
 
@@ -20,20 +20,24 @@ Everything outside ``timing`` is a function of the agent's files, the scenarios,
 the batch size and the package versions: an interrupted run finished with ``--resume`` (or a run
 with any ``--workers``) gives the same per-episode log and a JSON identical outside ``timing``.
 
-``<out>.jsonl.gz``: gzip (no name, no time stamp) of one JSON line per episode and scenario,
-sorted by scenario (in run order) then episode: ``{"scenario", "episode", "seed", "steps",
-"aircraft": [per-aircraft record]}``; each aircraft record ends with ``actions``, its decisions
-one character each (:data:`cdr_bench.evaluate.runner.ACTION_CODE`), from which
-``leaderboard build --check`` replays the episode exactly.
+``<out>.jsonl.xz``: xz (:func:`compress_log`: one fixed filter chain, so the same text gives
+the same bytes) of one JSON line per episode and scenario, sorted by scenario (in run order)
+then episode: ``{"scenario", "episode", "seed", "steps", "aircraft": [per-aircraft record]}``;
+each aircraft record ends with ``actions``, its decisions one character each
+(:data:`cdr_bench.evaluate.runner.ACTION_CODE`), from which ``leaderboard build --check``
+replays the episode exactly. A schema-4 log written before xz (``<out>.jsonl.gz``, gzip, named
+so by its JSON's ``episodes_file``) is still read. :func:`log_text` reads every form (xz, gzip,
+plain), with a cap on the decompressed size (:data:`cdr_bench.checks.MAX_EPISODE_LOG_BYTES`).
 
 Results of schema 3 (a plain ``.jsonl`` log without decisions; the archived runs under
 ``sweeps/landed/``) are still read, metrics computed the same way; they cannot be replayed, and
 a leaderboard entry must be schema 4.
 
 The two are one result: the JSON carries the SHA-256 of the uncompressed log
-(``episodes_sha256``; of the text, so that another zlib's bytes do not matter) and every reader
-(:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a pair that does
-not match, e.g. a new log beside an old JSON after a disk filled up between the two renames.
+(``episodes_sha256``; of the text, so that another compressor's bytes do not matter) and every
+reader (:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a pair
+that does not match, e.g. a new log beside an old JSON after a disk filled up between the two
+renames.
 
 ``<out>.partial.jsonl`` (only while a run is unfinished): a header line with the ``run_key``,
 then one line per finished batch (appended and fsync'ed); a torn last line is ignored. Every
@@ -56,9 +60,11 @@ import hashlib
 import hmac
 import io
 import json
+import lzma
 import os
 import platform
 import tempfile
+import zlib
 from collections.abc import Callable, Iterable
 from importlib import metadata
 from pathlib import Path
@@ -68,7 +74,12 @@ from cdr_bench.checks import MAX_EPISODE_LOG_BYTES, MAX_RESULT_BYTES, file_kind,
 from cdr_bench.errors import UserError
 
 SCHEMA_VERSION = 4
-EPISODES_SUFFIX = ".jsonl.gz"
+LOG_SUFFIX = ".jsonl.xz"
+"""The compressed form of a JSON-lines log (:func:`compress_log`)."""
+EPISODES_SUFFIX = LOG_SUFFIX
+LEGACY_EPISODES_SUFFIX = ".jsonl.gz"
+"""Per-episode logs of schema 4 written before xz (gzip): still read."""
+XZ_FILTERS: list[dict[str, int]] = [{"id": lzma.FILTER_LZMA2, "preset": 9 | lzma.PRESET_EXTREME}]
 RESULT_KIND = "cdr-bench evaluation"
 
 
@@ -139,13 +150,70 @@ def _refuse_non_regular(path: Path) -> None:
         raise UserError(f"{path}: is {kind}, not a regular file; refusing to replace it")
 
 
-def gzip_bytes(text: str) -> bytes:
-    """``text`` (UTF-8) as gzip with no file name and time stamp 0: the same text gives the
-    same bytes with the same zlib."""
-    buf = io.BytesIO()
-    with gzip.GzipFile(filename="", mode="wb", fileobj=buf, mtime=0, compresslevel=9) as f:
-        f.write(text.encode("utf-8"))
-    return buf.getvalue()
+def compress_log(text: str) -> bytes:
+    """``text`` (UTF-8) as xz with a fixed filter chain (:data:`XZ_FILTERS`, CRC-64 check): the
+    same text gives the same bytes with the same liblzma. Every log the package writes
+    compressed goes through here (per-episode logs, shipped training logs); :func:`log_text`
+    reads them back."""
+    return lzma.compress(
+        text.encode("utf-8"), format=lzma.FORMAT_XZ, check=lzma.CHECK_CRC64, filters=XZ_FILTERS
+    )
+
+
+class _TooLarge(Exception):
+    """Raised by the decompressors below past their limit."""
+
+
+def _xz_decompress(data: bytes, limit: int) -> bytes:
+    """The single xz stream ``data`` decompressed, stopped (``_TooLarge``) past ``limit`` bytes
+    so that a small file cannot expand without bound."""
+    dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
+    out = bytearray(dec.decompress(data, max_length=limit + 1))
+    while len(out) <= limit and not dec.eof and not dec.needs_input:
+        out += dec.decompress(b"", max_length=limit + 1 - len(out))
+    if len(out) > limit:
+        raise _TooLarge
+    if not dec.eof:
+        raise EOFError("truncated xz stream")
+    if dec.unused_data:
+        raise lzma.LZMAError("data after the end of the xz stream")
+    return bytes(out)
+
+
+def _gzip_decompress(data: bytes, limit: int) -> bytes:
+    with gzip.GzipFile(fileobj=io.BytesIO(data), mode="rb") as f:
+        out = f.read(limit + 1)
+    if len(out) > limit:
+        raise _TooLarge
+    return out
+
+
+def log_text(
+    path: str | os.PathLike[str], what: str = "per-episode log", limit: int = MAX_EPISODE_LOG_BYTES
+) -> str:
+    """The text of a JSON-lines log: xz (``X.jsonl.xz``, :func:`compress_log`), gzip
+    (``X.jsonl.gz``, the per-episode logs written before xz) or plain (any other name); at most
+    ``limit`` bytes of text, compressed or not. ``ValueError`` naming the file otherwise
+    (missing, not a regular file, damaged, too large, not UTF-8)."""
+    p = Path(path)
+    try:
+        raw = read_input(p, limit, what)
+    except UserError as e:
+        raise ValueError(str(e)) from None
+    kind = "an xz" if p.name.endswith(".xz") else "a gzip" if p.name.endswith(".gz") else None
+    try:
+        if kind == "an xz":
+            raw = _xz_decompress(raw, limit)
+        elif kind == "a gzip":
+            raw = _gzip_decompress(raw, limit)
+    except _TooLarge:
+        raise ValueError(f"{p}: larger than a {what} may be ({limit} bytes uncompressed)") from None
+    except (OSError, EOFError, lzma.LZMAError, zlib.error) as e:
+        raise ValueError(f"{p}: not {kind} {what} ({e})") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{p}: not UTF-8 text ({e})") from None
 
 
 def atomic_write_text(path: Path, text: str | bytes) -> None:
@@ -325,38 +393,13 @@ def strip_metrics(result: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, Any]]) -> None:
-    """The per-episode log first (gzip JSONL), then the JSON that names it and carries the
-    SHA-256 of its text (both atomic); readers refuse a pair whose hashes differ. Metrics are
-    not written: they are computed when the result is read."""
+    """The per-episode log first (xz JSONL, :func:`compress_log`), then the JSON that names it
+    and carries the SHA-256 of its text (both atomic); readers refuse a pair whose hashes
+    differ. Metrics are not written: they are computed when the result is read."""
     text = jsonl_text(episodes)
     result = {**strip_metrics(result), "episodes_sha256": sha256_text(text)}
-    atomic_write_text(episodes_path(out), gzip_bytes(text))
+    atomic_write_text(episodes_path(out), compress_log(text))
     atomic_write_text(out, json.dumps(result, indent=1) + "\n")
-
-
-def episodes_text(path: Path) -> str:
-    """The text of a per-episode log (gzip JSONL); ``ValueError`` naming it if unreadable."""
-    try:
-        with gzip.open(path, "rb") as f:
-            raw = f.read(MAX_EPISODE_LOG_BYTES + 1)
-        if len(raw) > MAX_EPISODE_LOG_BYTES:
-            raise ValueError(
-                f"{path}: larger than a per-episode log may be ({MAX_EPISODE_LOG_BYTES} bytes "
-                "uncompressed)"
-            )
-        return raw.decode("utf-8")
-    except (OSError, EOFError, UnicodeDecodeError, gzip.BadGzipFile) as e:
-        raise ValueError(f"{path}: not a gzip per-episode log ({e})") from None
-
-
-def _legacy_text(path: Path) -> str:
-    """The text of a schema-3 per-episode log (plain JSONL); ``ValueError`` if unreadable."""
-    try:
-        return read_input(path, MAX_EPISODE_LOG_BYTES, "per-episode log").decode("utf-8")
-    except UserError as e:
-        raise ValueError(str(e)) from None
-    except UnicodeDecodeError as e:
-        raise ValueError(f"{path}: not UTF-8 text ({e})") from None
 
 
 _EPISODES_CACHE: dict[tuple[str, str], list[dict[str, Any]]] = {}
@@ -414,15 +457,16 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
         not isinstance(name, str)
         or "/" in name
         or "\\" in name
-        or not name.endswith(".jsonl" if legacy else EPISODES_SUFFIX)
+        or not name.endswith((".jsonl",) if legacy else (EPISODES_SUFFIX, LEGACY_EPISODES_SUFFIX))
     ):
         raise ValueError(
-            f"{p}: episodes_file: expected a {EPISODES_SUFFIX} file name beside the result"
+            f"{p}: episodes_file: expected a {'.jsonl' if legacy else EPISODES_SUFFIX} file name "
+            "beside the result"
         )
     ep = p.parent / name
     if not ep.is_file():
         raise ValueError(f"{p}: its per-episode file {ep} is missing")
-    text = _legacy_text(ep) if legacy else episodes_text(ep)
+    text = log_text(ep)
     digest = sha256_text(text)
     if digest != data.get("episodes_sha256"):
         raise ValueError(
@@ -451,5 +495,5 @@ def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -
     cached = _EPISODES_CACHE.get((str(p.resolve()), digest))
     if cached is not None:
         return cached
-    text = _legacy_text(p) if p.suffix == ".jsonl" else episodes_text(p)
+    text = log_text(p)
     return _parse_episodes(p, text, sha256_text(text))

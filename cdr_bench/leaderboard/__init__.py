@@ -5,7 +5,7 @@ Layout of a leaderboard folder (``leaderboard/`` in the repository)::
 
     submissions/<name>.yaml      one entry each: agent, checkpoint, authors, reference, training
                                  command, scenarios (see :mod:`.submission`)
-    results/<name>.json|.jsonl   written by ``cdr-bench evaluate`` (run by ``build --evaluate``)
+    results/<name>.json|.jsonl.xz   written by ``cdr-bench evaluate`` (run by ``build --evaluate``)
     results/<name>.multimodal-<scenario>.json   written by ``cdr-bench multimodal`` (optional)
     results/<name>.replays.json  trajectories of the first episodes of the scenarios the entry
                                  replays (``replays``; recorded by the scorer, :mod:`.entry`)

@@ -52,7 +52,7 @@ from cdr_bench.evaluate import aggregate
 from cdr_bench.evaluate.compare import compare, holm, scenario_indices, scenario_seed
 from cdr_bench.evaluate.loader import agent_identity
 from cdr_bench.evaluate.report import COLUMNS
-from cdr_bench.evaluate.results import SCHEMA_VERSION, read_episodes, read_result
+from cdr_bench.evaluate.results import SCHEMA_VERSION, log_text, read_episodes, read_result
 from cdr_bench.leaderboard.claims import SCENARIO as CLAIMS_SCENARIO
 from cdr_bench.leaderboard.claims import build_claims
 from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
@@ -613,10 +613,11 @@ def tactical_cells(e: Entry, sid: str, fixed: bool) -> dict[str, Any]:
 
 
 def _read_log(path: Path) -> list[dict[str, Any]]:
+    """A training log, plain ``.jsonl`` or xz ``.jsonl.xz`` (:func:`log_text`)."""
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = log_text(path, "training log").splitlines()
         return [json.loads(x) for x in lines if x.strip()]
-    except (OSError, json.JSONDecodeError) as e:
+    except (ValueError, RecursionError) as e:  # json.JSONDecodeError is a ValueError
         raise UserError(f"{path}: cannot read the training log ({e})") from None
 
 

@@ -16,7 +16,8 @@ Example (``leaderboard/submissions/mvp.yaml``)::
     scenarios: paper
     replays: [tactical/head-on, tactical/crossing, tactical/overtaking]
 
-A learned entry also names its training logs (``training_logs``: one JSON-lines log per seed;
+A learned entry also names its training logs (``training_logs``: one JSON-lines log per seed,
+plain ``.jsonl`` or xz ``.jsonl.xz``;
 the budget and seed columns and the learning curves are read from them) and, when it is an
 ablation of another entry, ``group: ablation``; a scripted resolver with a learned part
 (MVP with a learned override) is ``group: hybrid``, ranked and summarised apart from the agents
@@ -31,10 +32,10 @@ seed, ``results/<name>.seed-<k>.json`` for the others) and the leaderboard aggre
     seeds:
       - seed: 1
         checkpoint: agents/ppo/seeds/1/checkpoint.pt
-        training_log: agents/ppo/seeds/1/training_log.jsonl
+        training_log: agents/ppo/seeds/1/training_log.jsonl.xz
       - seed: 2
         checkpoint: agents/ppo/seeds/2/checkpoint.pt
-        training_log: agents/ppo/seeds/2/training_log.jsonl
+        training_log: agents/ppo/seeds/2/training_log.jsonl.xz
 
 Paths (``agent``, ``checkpoint``, a ``reference`` that is not a URL) are relative to the
 repository root, i.e. the folder holding ``leaderboard/``, and must stay inside it.
@@ -62,6 +63,7 @@ from urllib.parse import urlsplit
 import yaml
 
 from cdr_bench.errors import ScenarioError, UserError, short_repr
+from cdr_bench.evaluate.results import LOG_SUFFIX
 from cdr_bench.leaderboard import text as tx
 from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_problem
 
@@ -70,6 +72,10 @@ GROUPS = ("scripted", "learned", "hybrid", "ablation")
 """Groups of measured entries, in display order (the paper's numbers are a fourth group,
 ``published``, never measured here)."""
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
+TRAINING_LOG_SUFFIXES = (".jsonl", LOG_SUFFIX)
+"""A training log is JSON lines, plain or xz (:func:`cdr_bench.evaluate.results.compress_log`:
+the shipped logs are kept compressed)."""
+_LOG_FILE = f"a {' or '.join(TRAINING_LOG_SUFFIXES)} file"
 """Checkpoint formats that load without unpickling arbitrary objects (``torch.load`` with
 ``weights_only=True``, safetensors, ``numpy.load`` with ``allow_pickle=False``)."""
 
@@ -320,8 +326,8 @@ FIELDS: dict[str, tuple[bool, str]] = {
     ),
     "training_logs": (
         False,
-        "training logs (.jsonl, one per seed, each ending in a 'final' line): the budget and "
-        "seed columns and the learning curves come from them",
+        "training logs (.jsonl or .jsonl.xz, one per seed, each ending in a 'final' line): the "
+        "budget and seed columns and the learning curves come from them",
     ),
     "budget": (
         False,
@@ -334,10 +340,10 @@ FIELDS: dict[str, tuple[bool, str]] = {
     ),
     "seeds": (
         False,
-        "every training seed: a list of {seed: K, checkpoint: FILE, training_log: FILE.jsonl} "
-        "with an optional `parent: RUN` (the run a seed continued from; seeds with the same "
-        "parent count as one in the aggregates over seeds); `checkpoint` is one of them (the "
-        "seed the per-episode views show), `training_logs` is then not given",
+        "every training seed: a list of {seed: K, checkpoint: FILE, training_log: "
+        "FILE.jsonl[.xz]} with an optional `parent: RUN` (the run a seed continued from; seeds "
+        "with the same parent count as one in the aggregates over seeds); `checkpoint` is one "
+        "of them (the seed the per-episode views show), `training_logs` is then not given",
     ),
 }
 """Every key of a submission file: ``name -> (required, meaning)``."""
@@ -447,8 +453,8 @@ def load_submission(
     logs = _str_list(src, "training_logs", data.get("training_logs", []), allow_empty=True)
     for i, log in enumerate(logs):
         full = _repo_path(src, f"training_logs[{i}]", log, root)
-        if not full.is_file() or full.suffix != ".jsonl":
-            raise SubmissionError(src, f"training_logs[{i}]", f"expected a .jsonl file, got {log}")
+        if not full.is_file() or not full.name.endswith(TRAINING_LOG_SUFFIXES):
+            raise SubmissionError(src, f"training_logs[{i}]", f"expected {_LOG_FILE}, got {log}")
     if len(set(logs)) != len(logs):
         raise SubmissionError(src, "training_logs", f"a log is listed twice: {list(logs)}")
     if logs and training is None:
@@ -581,7 +587,7 @@ def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
             raise SubmissionError(
                 src,
                 f,
-                "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl} "
+                "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl[.xz]} "
                 f"(and optionally parent: RUN), got {item!r}",
             )
         k = item["seed"]
@@ -598,8 +604,8 @@ def _seeds(src: Path, v: Any, root: Path) -> tuple[Seed, ...]:
                 f"expected a file ending in {', '.join(CHECKPOINT_SUFFIXES)}, got {ck}",
             )
         full = _repo_path(src, f"{f}.training_log", log, root)
-        if not full.is_file() or full.suffix != ".jsonl":
-            raise SubmissionError(src, f"{f}.training_log", f"expected a .jsonl file, got {log}")
+        if not full.is_file() or not full.name.endswith(TRAINING_LOG_SUFFIXES):
+            raise SubmissionError(src, f"{f}.training_log", f"expected {_LOG_FILE}, got {log}")
         parent = _str(src, f"{f}.parent", item.get("parent"), allow_none=True)
         out.append(Seed(k, ck, log, parent))
     for key in ("seed", "checkpoint", "training_log"):

@@ -16,9 +16,10 @@ only. ``cdr-bench leaderboard build`` and ``cdr-bench leaderboard render-docs`` 
 differs from what the files give.
 
 Training logs are read as JSON lines: the leaderboard never imports the trainers
-(``cdr_bench.rl``), and they never import it. The logs of runs that are not leaderboard entries
-(tuning, the short design runs) and the per-episode file of an analysis run are kept
-gzip-compressed (``.jsonl.gz``, :mod:`cdr_bench.jsonl`); either form is read.
+(``cdr_bench.rl``), and they never import it. The training logs of the entries are kept
+xz-compressed (``.jsonl.xz``), the logs of runs that are not leaderboard entries (tuning, the
+short design runs) and the per-episode file of an analysis run gzip-compressed (``.jsonl.gz``);
+every form is read (:mod:`cdr_bench.jsonl`).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from cdr_bench.actions import decode
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.report import Cell, Rows, fmt_metric, fmt_ms, fmt_value, md_table
 from cdr_bench.evaluate.results import atomic_write_text, read_result
-from cdr_bench.jsonl import GZ, gunzip_file
+from cdr_bench.jsonl import GZ, existing, gunzip_file
 from cdr_bench.jsonl import read_jsonl as _read_jsonl_any
 from cdr_bench.leaderboard.page_tables import (
     DENSITIES,
@@ -74,7 +75,8 @@ def _read_json(path: Path) -> Any:
 
 
 def _read_jsonl(path: Path) -> list[dict[str, Any]]:
-    """A JSON-lines file, plain or gzip (``X.jsonl`` or ``X.jsonl.gz``, either name)."""
+    """A JSON-lines file, plain, gzip or xz (``X.jsonl``, ``X.jsonl.gz``, ``X.jsonl.xz``, any
+    name)."""
     try:
         return _read_jsonl_any(path)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
@@ -440,7 +442,7 @@ def latency(repo: Repo, entries: Iterable[str]) -> str:
 
 
 def training(repo: Repo, name: str, stages: str = "scenarios/curriculum") -> str:
-    log = repo.agent_dir(name) / "training_log.jsonl"
+    log = existing(repo.agent_dir(name) / "training_log.jsonl")  # plain or .jsonl.xz
     n_stages = len(list((repo.root / stages).glob("stage-*.yaml")))
     return training_summary(_final(log), log.relative_to(repo.root).as_posix(), n_stages or None)
 

@@ -19,7 +19,7 @@ def register(sub: Any) -> None:
         help="train and evaluate a grid of settings x seeds on Ray (sweeps/*.yaml)",
         description="Run a sweep file: each trial trains with `cdr-bench train` and is scored "
         "with `cdr-bench evaluate`; one folder per trial (named by a hash of its settings) "
-        "holding the run, trial.json and result.json/.jsonl.gz. Runs on a local Ray started on "
+        "holding the run, trial.json and result.json/.jsonl.xz. Runs on a local Ray started on "
         "demand, or on a cluster with --address.",
     )
     p.add_argument("sweep", help="sweep YAML file")

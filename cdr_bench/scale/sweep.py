@@ -15,7 +15,7 @@ Fault tolerance without a scheduler of our own:
   succeeded, renames that folder to ``<out>/<key>/`` (one ``rename``: atomic, and it fails if
   the folder exists, so two attempts of one trial can never both land);
 - a trial folder exists only complete, with ``trial.json`` (settings, timings) and the result
-  files ``result.json`` / ``result.jsonl.gz`` written by ``cdr-bench evaluate``;
+  files ``result.json`` / ``result.jsonl.xz`` written by ``cdr-bench evaluate``;
 - ``--resume`` skips every trial whose folder exists;
 - an attempt that died (a killed sweep, a lost node, the end of a session) leaves its work
   folder with the trainer's last saved state (``state.pt``, every ``checkpoint_every``

@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
     # 1. Score the agent: its own process, the same episodes for every agent (seeded by the
     #    scenario, its config hash and the episode index). Writes a JSON (the run) and a
-    #    gzip JSONL beside it (one record per episode: each aircraft's outcome, events and
+    #    xz JSONL beside it (one record per episode: each aircraft's outcome, events and
     #    decisions).
     run = ["--scenario", a.scenario, "--episodes", str(a.episodes), "--no-progress", "--force"]
     cdr_bench("evaluate", str(HERE / "level_change_agent.py"), *run, "--out", str(mine))

@@ -4,13 +4,14 @@
 
 For every finished trial of the sweep (``trial.json`` and ``checkpoint.pt`` present) it copies
 the checkpoint, the training log and the training arguments: the ``--primary`` seed into the
-agent folder itself (``checkpoint.pt``, ``training_log.jsonl``, ``train_args.json`` and its
+agent folder itself (``checkpoint.pt``, ``training_log.jsonl.xz``, ``train_args.json`` and its
 ``curve.png``: the files the agent loads by default, replacing the earlier run), every other
-seed into ``seeds/<k>/``. ``run_dir`` in the arguments is made relative
-to the repository. Then it prints the ``checkpoint`` and ``seeds`` fields for the entry's
-submission file. Unfinished trials are
-skipped (say so); copying is by temporary file and rename, so an interrupted run leaves no
-half-written checkpoint.
+seed into ``seeds/<k>/``. The training log is shipped xz-compressed
+(:func:`cdr_bench.evaluate.results.compress_log`, deterministic; the leaderboard reads it as
+it is) and replaces a plain ``training_log.jsonl`` of an earlier run. ``run_dir`` in the
+arguments is made relative to the repository. Then it prints the ``checkpoint`` and ``seeds``
+fields for the entry's submission file. Unfinished trials are skipped (say so); copying is by
+temporary file and rename, so an interrupted run leaves no half-written checkpoint.
 
     python sweeps/seeds/ship.py runs/sweeps/table3 agents/diffusion_ac \
         --where ablation=no-dpsc --into ablations/no-dpsc
@@ -46,6 +47,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from cdr_bench.evaluate.results import compress_log, log_text
 from cdr_bench.jsonl import existing, gzip_file, read_bytes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -66,7 +68,7 @@ OPTIONAL = ("curve.png",)
 
 
 def _digest(path: Path) -> str:
-    """SHA-256 of the file's content (decompressed if it is gzip; either name)."""
+    """SHA-256 of the file's content (decompressed if it is gzip or xz; any name)."""
     return hashlib.sha256(read_bytes(path)).hexdigest()
 
 
@@ -75,7 +77,11 @@ def shipped_checkpoints() -> dict[str, Path]:
     (the log too: a shipped checkpoint may have been edited after shipping, e.g. the margin
     written into an MVP + learned improvement checkpoint, while its log is a byte copy)."""
     agents = ROOT / "agents"
-    logs = [*agents.rglob("training_log.jsonl"), *agents.rglob("training_log.jsonl.gz")]
+    logs = [
+        *agents.rglob("training_log.jsonl"),
+        *agents.rglob("training_log.jsonl.gz"),
+        *agents.rglob("training_log.jsonl.xz"),
+    ]
     return {_digest(p): p for p in sorted([*agents.rglob("*.pt"), *logs])}
 
 
@@ -174,9 +180,10 @@ def main(argv: list[str] | None = None) -> int:
         args["run_dir"] = os.path.relpath(d.resolve(), ROOT)
         _copy(d / "checkpoint.pt", dest / "checkpoint.pt")
         dest.mkdir(parents=True, exist_ok=True)
-        tmp = dest / "training_log.jsonl.tmp"
-        tmp.write_bytes(read_bytes(existing(d / "log.jsonl")))  # plain, as the leaderboard reads
-        os.replace(tmp, dest / "training_log.jsonl")
+        tmp = dest / "training_log.jsonl.xz.tmp"
+        tmp.write_bytes(compress_log(log_text(existing(d / "log.jsonl"), "training log")))
+        os.replace(tmp, dest / "training_log.jsonl.xz")
+        (dest / "training_log.jsonl").unlink(missing_ok=True)  # an earlier run's, plain
         if seed == a.primary and (d / "curve.png").is_file():
             _copy(d / "curve.png", dest / "curve.png")
         tmp = dest / "train_args.json.tmp"
@@ -202,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     for k, p in rel.items():
         print(
             f"  - {{seed: {k}, checkpoint: {p}/checkpoint.pt, "
-            f"training_log: {p}/training_log.jsonl}}"
+            f"training_log: {p}/training_log.jsonl.xz}}"
         )
     return 0
 

@@ -285,7 +285,7 @@ def test_report_refuses_a_result_with_edited_metrics(capsys, tmp_path, results) 
     data["scenarios"][0]["metrics"] = {"ownship": {"success_rate": {"value": 1.5}}}
     edited = tmp_path / "mvp.json"
     edited.write_text(json.dumps(data))
-    log = Path(mvp).with_suffix(".jsonl.gz")
+    log = Path(mvp).with_suffix(".jsonl.xz")
     (tmp_path / log.name).write_bytes(log.read_bytes())
     code, _, err = cdr(capsys, "report", str(edited))
     assert code == 2 and "scenario low carries stored metrics" in err

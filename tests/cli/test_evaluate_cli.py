@@ -5,7 +5,6 @@ output counts too); only the runs that are killed are processes of their own."""
 
 from __future__ import annotations
 
-import gzip
 import json
 import os
 import signal
@@ -19,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from cdr_bench.cli import main
-from cdr_bench.evaluate.results import read_result, resume_key_path
+from cdr_bench.evaluate.results import compress_log, log_text, read_result, resume_key_path
 
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS = ROOT / "agents"
@@ -87,7 +86,7 @@ def without_timing(path):
 
 
 def no_results_left(tmp_path):
-    return not [p for p in tmp_path.rglob("*") if p.suffix in (".json", ".jsonl", ".gz")]
+    return not [p for p in tmp_path.rglob("*") if p.suffix in (".json", ".jsonl", ".gz", ".xz")]
 
 
 BASE = """
@@ -174,7 +173,7 @@ def test_evaluate_writes_summary_and_result_files(cdr, tmp_path):
     assert sc["id"] == "marl/low-2" and sc["config"]["id"] == "marl/low-2"
     assert set(sc["metrics"]) == {"ownship", "intruders"}
     assert sc["metrics"]["intruders"]["episodes"] == 16
-    lines = gzip.open(out.with_suffix(".jsonl.gz"), "rt").read().splitlines()
+    lines = log_text(out.with_suffix(".jsonl.xz")).splitlines()
     assert len(lines) == 8 and json.loads(lines[0])["scenario"] == "marl/low-2"
     first = json.loads(lines[0])["aircraft"]
     assert all(len(a["actions"]) == a["steps"] for a in first)  # one decision per step flown
@@ -200,8 +199,8 @@ def test_workers_and_resume_give_identical_results(cdr, tmp_path):
     par = tmp_path / "par.json"
     r = evaluate(cdr, agent, par, "--workers", 2, episodes=16)
     assert r.returncode == 0, r.stderr
-    assert without_timing(par) == {**without_timing(ref), "episodes_file": "par.jsonl.gz"}
-    assert par.with_suffix(".jsonl.gz").read_bytes() == ref.with_suffix(".jsonl.gz").read_bytes()
+    assert without_timing(par) == {**without_timing(ref), "episodes_file": "par.jsonl.xz"}
+    assert par.with_suffix(".jsonl.xz").read_bytes() == ref.with_suffix(".jsonl.xz").read_bytes()
 
     out = tmp_path / "res.json"
     partial = out.with_suffix(".partial.jsonl")
@@ -212,8 +211,8 @@ def test_workers_and_resume_give_identical_results(cdr, tmp_path):
     assert r.returncode == 0, r.stderr
     res = json.loads(out.read_text())
     assert res["timing"]["resumed"] is True
-    assert without_timing(out) == {**without_timing(ref), "episodes_file": "res.jsonl.gz"}
-    assert out.with_suffix(".jsonl.gz").read_bytes() == ref.with_suffix(".jsonl.gz").read_bytes()
+    assert without_timing(out) == {**without_timing(ref), "episodes_file": "res.jsonl.xz"}
+    assert out.with_suffix(".jsonl.xz").read_bytes() == ref.with_suffix(".jsonl.xz").read_bytes()
     assert not partial.exists()
 
 
@@ -436,11 +435,9 @@ def test_report_refuses_a_result_whose_episode_log_differs(cdr, tmp_path):
     assert evaluate(cdr, AGENTS / "direct", out, episodes=4).returncode == 0
     assert cdr("report", out).returncode == 0
     # a disk that filled up between the two renames: a new JSONL beside the old JSON
-    ep = out.with_suffix(".jsonl.gz")
-    text = gzip.open(ep, "rt").read()
-    ep.write_bytes(
-        gzip.compress((text.replace('"outcome":"los"', '"outcome":"success"') + "\n").encode())
-    )
+    ep = out.with_suffix(".jsonl.xz")
+    text = log_text(ep)
+    ep.write_bytes(compress_log(text.replace('"outcome":"los"', '"outcome":"success"') + "\n"))
     for cmd in (("report", out), ("compare", out, out)):
         r = cdr(*cmd)
         assert r.returncode == 2, r.stderr

@@ -3,7 +3,6 @@ leaderboards, and the all-or-nothing behaviour with misbehaving submissions."""
 
 from __future__ import annotations
 
-import gzip
 import json
 import re
 import textwrap
@@ -11,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from cdr_bench.evaluate.results import gzip_bytes, read_result, sha256_text
+from cdr_bench.evaluate.results import compress_log, log_text, read_result, sha256_text
 from tests.leaderboard.conftest import EPISODES, SCENARIOS, cdr, snapshot, submission_yaml
 
 
@@ -82,7 +81,7 @@ def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     assert [t["episode"] for t in fixed] == [0, 1, 2]
     first = next(
         json.loads(x)
-        for x in gzip.open(lb / "results" / "weave.jsonl.gz", "rt").read().splitlines()
+        for x in log_text(lb / "results" / "weave.jsonl.xz").splitlines()
         if '"scenario":"tactical/head-on-fixed"' in x
     )
     assert fixed[0]["seed"] == first["seed"]
@@ -146,9 +145,9 @@ def test_check_fails_on_tampered_result_file(repo: Path) -> None:
     """A per-episode log edited without its hash: every reader refuses the pair. (Edits with
     the hash recomputed are caught by the replay: tests/leaderboard/test_verify.py.)"""
     lb = repo / "leaderboard"
-    log = lb / "results" / "direct.jsonl.gz"
-    text = gzip.open(log, "rt").read().replace('"outcome":"', '"outcome":"x', 1)
-    log.write_bytes(gzip.compress(text.encode()))
+    log = lb / "results" / "direct.jsonl.xz"
+    text = log_text(log).replace('"outcome":"', '"outcome":"x', 1)
+    log.write_bytes(compress_log(text))
     r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
     assert r.returncode == 1
     assert "results/direct.json" in r.stderr
@@ -255,8 +254,8 @@ def test_adding_a_submission_is_one_yaml_file(repo: Path) -> None:
         cwd=repo,
     )
     assert r.returncode == 0, r.stderr
-    assert (lb / "results" / "direct-again.jsonl.gz").read_bytes() == (
-        lb / "results" / "direct.jsonl.gz"
+    assert (lb / "results" / "direct-again.jsonl.xz").read_bytes() == (
+        lb / "results" / "direct.jsonl.xz"
     ).read_bytes()  # same agent, same episodes (the count is taken from the committed results)
     assert "Direct again" in (lb / "README.md").read_text()
 
@@ -342,18 +341,18 @@ def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> No
     assert 'id="table-seeds"' in (lb / "index.html").read_text()
     # a seed's result tampered with: the check fails naming the file; a missing one is an error
     p = res / "weave.seed-2.json"
-    text = gzip.open(p.with_suffix(".jsonl.gz"), "rt").read()
+    text = log_text(p.with_suffix(".jsonl.xz"))
     forged = text.replace('"outcome":"boundary"', '"outcome":"success"', 1)
     forged = forged.replace('"outcome":"timeout"', '"outcome":"success"', 1)
     forged = forged.replace('"los":true', '"los":false', 1) if forged == text else forged
     assert forged != text
-    p.with_suffix(".jsonl.gz").write_bytes(gzip_bytes(forged))
+    p.with_suffix(".jsonl.xz").write_bytes(compress_log(forged))
     doc = json.loads(p.read_text())
     doc["episodes_sha256"] = sha256_text(forged)
     p.write_text(json.dumps(doc, indent=1) + "\n")
     r = cdr("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, cwd=repo)
     assert r.returncode == 1 and "weave.seed-2.json" in r.stderr, r.stderr
     p.unlink()
-    (res / "weave.seed-2.jsonl.gz").unlink()
+    (res / "weave.seed-2.jsonl.xz").unlink()
     r = cdr("leaderboard", "build", "--reference", "weave", cwd=repo)
     assert r.returncode == 2 and "no result file for seed 2 of weave" in r.stderr

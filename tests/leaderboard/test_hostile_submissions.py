@@ -10,7 +10,6 @@ with a one-line reason and writes nothing.
 
 from __future__ import annotations
 
-import gzip
 import json
 import os
 import textwrap
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from cdr_bench.evaluate.results import read_result
+from cdr_bench.evaluate.results import log_text, read_result
 from cdr_bench.evaluate.sandbox import isolation
 from tests.leaderboard.conftest import EPISODES, ROOT, cdr, submission_yaml
 
@@ -181,7 +180,7 @@ def build(repo: Path) -> tuple[int, str]:
 
 
 def episodes(path: Path) -> list[dict]:
-    text = gzip.open(path, "rt").read()
+    text = log_text(path)
     return [json.loads(line) for line in text.splitlines() if line.strip()]
 
 
@@ -207,7 +206,7 @@ def test_silent_attacks_have_no_effect(repo: Path, tmp_path: Path) -> None:
     unexpected = [k for k in changed if not k.startswith(allowed_prefixes) and k not in allowed]
     assert not unexpected, f"files changed: {unexpected}"
     # the entry scores exactly as the honest agent it wraps
-    assert episodes(results / "evil.jsonl.gz") == episodes(results / "direct.jsonl.gz")
+    assert episodes(results / "evil.jsonl.xz") == episodes(results / "direct.jsonl.xz")
     evil, direct = read_result(results / "evil.json"), read_result(results / "direct.json")
     assert [s["metrics"] for s in evil["scenarios"]] == [s["metrics"] for s in direct["scenarios"]]
 

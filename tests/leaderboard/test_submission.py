@@ -118,7 +118,7 @@ BAD = {
     "scripted with logs": (
         GOOD + "training_logs: [agents/direct/agent.py]\n",
         "training_logs[0]",
-        "expected a .jsonl file",
+        "expected a .jsonl or .jsonl.xz file",
     ),
     "learned without training": (GOOD + "group: learned\n", "training", "training command"),
     "budget shape": (
@@ -152,7 +152,7 @@ BAD = {
     "seed keys": (
         LEARNED + "seeds: [{seed: 1, checkpoint: agents/weave/seed-1.npz}, {seed: 2}]\n",
         "seeds[0]",
-        "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl}",
+        "expected {seed: K, checkpoint: FILE, training_log: FILE.jsonl[.xz]}",
     ),
     "seed number": (
         LEARNED + f"seeds: {WEAVE_SEEDS.replace('seed: 2', 'seed: two')}\n",
@@ -172,7 +172,7 @@ BAD = {
     "seed log not jsonl": (
         LEARNED + f"seeds: {WEAVE_SEEDS.replace('log-2.jsonl', 'seed-2.npz')}\n",
         "seeds[1].training_log",
-        "expected a .jsonl file",
+        "expected a .jsonl or .jsonl.xz file",
     ),
     "checkpoint not a seed": (
         LEARNED.replace("seed-1.npz", "other.npz") + f"seeds: {WEAVE_SEEDS}\n",
@@ -228,6 +228,22 @@ def test_seeds(lb: Path) -> None:
     assert view.training_logs == ("agents/weave/log-2.jsonl",)
     assert view.replays == () and view.multimodality == () and view.published_as == ()
     assert view.scenarios == s.scenarios and view.agent == s.agent
+
+
+def test_a_training_log_may_be_kept_as_xz(lb: Path) -> None:
+    """A shipped training log is ``.jsonl.xz``; the leaderboard reads it as the plain log."""
+    from cdr_bench.evaluate.results import compress_log
+    from cdr_bench.leaderboard.data import _read_log
+
+    plain = lb.parent / "agents" / "weave" / "log-2.jsonl"
+    packed = plain.with_name("log-2.jsonl.xz")
+    want = _read_log(plain)
+    packed.write_bytes(compress_log(plain.read_text()))
+    plain.unlink()
+    seeds = WEAVE_SEEDS.replace("log-2.jsonl", "log-2.jsonl.xz")
+    s = load_submission(write(lb, LEARNED + f"seeds: {seeds}\n"), lb.parent)
+    assert s.training_logs == ("agents/weave/log-1.jsonl", "agents/weave/log-2.jsonl.xz")
+    assert _read_log(packed) == want and want[-1] == {"final": {"step": 10000, "wall_s": 1.0}}
 
 
 def test_one_entry_may_reproduce_two_paper_rows_and_a_row_one_entry(lb: Path) -> None:

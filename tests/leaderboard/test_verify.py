@@ -8,14 +8,13 @@ replay passes and only the agent re-run can catch it)."""
 
 from __future__ import annotations
 
-import gzip
 import json
 import textwrap
 from pathlib import Path
 
 import pytest
 
-from cdr_bench.evaluate.results import gzip_bytes, sha256_text
+from cdr_bench.evaluate.results import compress_log, log_text, sha256_text
 from cdr_bench.leaderboard.verify import MIN_AGREEMENT, agreement_verdict, replay_result
 from tests.leaderboard.conftest import EPISODES, cdr, submission_yaml
 
@@ -23,14 +22,14 @@ CHECK = ("leaderboard", "build", "--check", "--reference", "weave", "--workers",
 
 
 def _lines(path: Path) -> list[dict]:
-    return [json.loads(x) for x in gzip.open(path, "rt").read().splitlines() if x]
+    return [json.loads(x) for x in log_text(path).splitlines() if x]
 
 
 def _rewrite(result: Path, records: list[dict]) -> None:
     """Write ``records`` as the result's per-episode log, with its hash updated in the JSON
     (what a forger does to pass the file's own consistency check)."""
     text = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in records)
-    result.with_suffix(".jsonl.gz").write_bytes(gzip_bytes(text))
+    result.with_suffix(".jsonl.xz").write_bytes(compress_log(text))
     doc = json.loads(result.read_text())
     doc["episodes_sha256"] = sha256_text(text)
     result.write_text(json.dumps(doc, indent=1) + "\n")
@@ -44,7 +43,7 @@ def test_replay_reproduces_every_committed_episode(repo: Path) -> None:
 
 def test_replay_catches_an_edited_outcome(repo: Path) -> None:
     res = repo / "leaderboard" / "results" / "direct.json"
-    recs = _lines(res.with_suffix(".jsonl.gz"))
+    recs = _lines(res.with_suffix(".jsonl.xz"))
     last = max(i for i, r in enumerate(recs) if r["scenario"] == "high")  # the last episode
     recs[last]["aircraft"][0]["min_sep_km"] = 99.0
     recs[last]["aircraft"][0]["los"] = False
@@ -57,7 +56,7 @@ def test_replay_catches_an_edited_outcome(repo: Path) -> None:
 
 def test_replay_catches_an_edited_decision(repo: Path) -> None:
     res = repo / "leaderboard" / "results" / "direct.json"
-    recs = _lines(res.with_suffix(".jsonl.gz"))
+    recs = _lines(res.with_suffix(".jsonl.xz"))
     first = min(i for i, r in enumerate(recs) if r["scenario"] == "low")
     code = recs[first]["aircraft"][0]["actions"]
     recs[first]["aircraft"][0]["actions"] = ("0" if code[0] != "0" else "1") + code[1:]
@@ -68,7 +67,7 @@ def test_replay_catches_an_edited_decision(repo: Path) -> None:
 
 def test_check_fails_on_a_forged_log_and_names_it(repo: Path) -> None:
     res = repo / "leaderboard" / "results" / "weave.seed-2.json"
-    recs = _lines(res.with_suffix(".jsonl.gz"))
+    recs = _lines(res.with_suffix(".jsonl.xz"))
     i = max(i for i, r in enumerate(recs) if r["scenario"] == "low")
     recs[i]["aircraft"][0]["goal_reward"] += 1.0
     _rewrite(res, recs)
@@ -82,7 +81,7 @@ def test_agent_rerun_catches_records_that_are_not_the_agents(repo: Path) -> None
     """Direct's high episodes replaced by Weave's on the same episodes: every record is what
     its decisions give (the replay passes), but they are not Direct's decisions."""
     res = repo / "leaderboard" / "results"
-    direct, weave = _lines(res / "direct.jsonl.gz"), _lines(res / "weave.jsonl.gz")
+    direct, weave = _lines(res / "direct.jsonl.xz"), _lines(res / "weave.jsonl.xz")
     forged = [
         next(w for w in weave if (w["scenario"], w["episode"]) == (d["scenario"], d["episode"]))
         if d["scenario"] == "high"

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from cdr_bench.evaluate.results import compress_log, log_text
+
 from .helpers import sweep_script
 
 
@@ -107,11 +109,12 @@ def test_bad_arguments_are_clear_errors(tmp_path: Path, capsys: pytest.CaptureFi
     assert f"{tmp_path}: expected an agent folder holding agent.py" in capsys.readouterr().err
 
 
-def test_ship_from_a_folder_with_compressed_logs_writes_a_plain_training_log(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+def test_ship_from_a_folder_with_compressed_logs_writes_an_xz_training_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """A staged trial keeps its log as ``log.jsonl.gz``; shipped, the agent gets the plain
-    ``training_log.jsonl`` its submission names (the leaderboard reads it plain)."""
+    """A staged trial keeps its log as ``log.jsonl.gz``; shipped, the agent gets the
+    ``training_log.jsonl.xz`` its submission names (deterministic xz, read as the plain log),
+    which replaces a plain log of an earlier run; the shipped log is recognised as shipped."""
     ship = sweep_script("seeds/ship")
     monkeypatch.setattr(ship, "ROOT", tmp_path)
     agent = tmp_path / "agents" / "x"
@@ -122,6 +125,16 @@ def test_ship_from_a_folder_with_compressed_logs_writes_a_plain_training_log(
     log = b'{"step": 1}\n{"final": {"step": 1}}\n'
     (sweep / "aaa" / "log.jsonl").unlink()
     (sweep / "aaa" / "log.jsonl.gz").write_bytes(gzip.compress(log))
+    (agent / "training_log.jsonl").write_text('{"step": 0}\n')  # an earlier run's
     assert ship.main([str(sweep), str(agent)]) == 0
-    assert (agent / "training_log.jsonl").read_bytes() == log
+    assert (agent / "training_log.jsonl.xz").read_bytes() == compress_log(log.decode())
+    assert log_text(agent / "training_log.jsonl.xz") == log.decode()
+    assert not (agent / "training_log.jsonl").exists()
     assert (agent / "checkpoint.pt").read_bytes() == b"weights"
+    assert "training_log: agents/x/training_log.jsonl.xz}" in capsys.readouterr().out
+    (agent / "checkpoint.pt").write_bytes(b"weights, edited after shipping")
+    (sweep / "aaa" / "log.jsonl").write_bytes(log)  # as the sweep wrote it
+    assert ship.main([str(sweep), "--stage"]) == 0
+    assert "skip aaa: already shipped as agents/x/training_log.jsonl.xz" in (
+        capsys.readouterr().out
+    )

@@ -44,7 +44,7 @@ def test_sweep_runs_and_resumes(local_ray, tmp_path):
         result = json.loads((out / t.key / RESULT_FILE).read_text())
         assert result["kind"] == "cdr-bench evaluation"
         assert result["agent"]["path"] == str(out.resolve() / t.key / "agent.py")
-        assert (out / t.key / "result.jsonl.gz").is_file()
+        assert (out / t.key / "result.jsonl.xz").is_file()
         assert not (out / t.key / "state.pt").exists()
     assert not (out / ".work").exists()
     assert sorted(p.name for p in out.iterdir()) == sorted(
@@ -97,7 +97,7 @@ def test_evaluate_ray_backend_equals_local(local_ray, tmp_path):
     )
     assert b["timing"]["backend"] == "ray" and a["timing"]["backend"] == "local"
     assert _strip(tmp_path / "local.json") == _strip(tmp_path / "ray.json")
-    assert (tmp_path / "local.jsonl.gz").read_bytes() == (tmp_path / "ray.jsonl.gz").read_bytes()
+    assert (tmp_path / "local.jsonl.xz").read_bytes() == (tmp_path / "ray.jsonl.xz").read_bytes()
     with pytest.raises(UserError, match="--address needs --backend ray"):
         evaluate(agent, jobs, tmp_path / "x.json", address="127.0.0.1:1", progress=False)
 

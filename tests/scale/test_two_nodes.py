@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gzip
 import json
 import os
 import shutil
@@ -18,6 +17,7 @@ import pytest
 
 pytest.importorskip("ray")
 
+from cdr_bench.evaluate.results import log_text  # noqa: E402
 from cdr_bench.scale.config import load_sweep  # noqa: E402
 from cdr_bench.scale.sweep import RESULT_FILE, TRIAL_FILE  # noqa: E402
 
@@ -172,7 +172,7 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
         assert rec["key"] == k
         res = json.loads((out / k / RESULT_FILE).read_text())
         assert len(res["scenarios"]) == 1 and res["scenarios"][0]["episodes"] == 2
-        assert len(gzip.open(out / k / "result.jsonl.gz", "rt").read().splitlines()) == 2
+        assert len(log_text(out / k / "result.jsonl.xz").splitlines()) == 2
     summary = json.loads((out / "sweep.json").read_text())
     assert summary["failures"] == {} and all(t["done"] for t in summary["trials"])
     # the attempt that died with the worker node did not land; a retry did
@@ -204,4 +204,4 @@ def test_sweep_survives_a_dead_worker_node(cluster, tmp_path):
             env=env,
         )
         assert r.returncode == 0, r.stderr
-    assert (tmp_path / "local.jsonl.gz").read_bytes() == (tmp_path / "ray.jsonl.gz").read_bytes()
+    assert (tmp_path / "local.jsonl.xz").read_bytes() == (tmp_path / "ray.jsonl.xz").read_bytes()
