@@ -178,8 +178,8 @@ CLAIRVOYANT_AGENT = textwrap.dedent(
 
     from cdr_bench.resolvers import mvp_actions
 
-    # Fingerprints of the public episodes' first observations (computed beforehand from the
-    # public base seed and seed derivation).
+    # Fingerprints of the public test episodes' first observations (computed beforehand from
+    # the public base seed and seed derivation).
     PUBLIC = {public!r}
 
     def fingerprint(row):
@@ -213,6 +213,7 @@ def _public_fingerprints() -> set[str]:
     import numpy as np
 
     from cdr_bench.evaluate.seeds import episode_seeds
+    from cdr_bench.leaderboard.build import BASE_SEED
     from cdr_bench.scenarios import load_scenario
     from cdr_bench.vector_env import VectorEnv
     from tests.leaderboard.conftest import SCENARIOS
@@ -221,7 +222,8 @@ def _public_fingerprints() -> set[str]:
     for s in SCENARIOS:
         config = load_scenario(s)
         env = VectorEnv(config, num_envs=EPISODES)
-        obs, _ = env.reset(seeds=episode_seeds(0, s, config.config_hash(), 0, EPISODES))
+        seeds = episode_seeds(BASE_SEED, s, config.config_hash(), 0, EPISODES)
+        obs, _ = env.reset(seeds=seeds)
         out |= {hashlib.sha256(np.round(r, 4).tobytes()).hexdigest()[:16] for r in obs[:, 0]}
     return out
 
