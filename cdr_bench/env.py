@@ -66,11 +66,14 @@ class CDREnv(ParallelEnv):
     sector boundary heading for a random goal in the interior and must reach it without losing
     separation. Optionally, some aircraft are **learning intruders** (``intruder_0``, ...): each
     flies its airway from start to end as its goal, under the same observation, action and reward
-    definitions. Background traffic is part of the environment, not agents.
+    definitions; in the ``marl/*-8``, ``-24`` and ``-all`` scenarios some or all of the airway
+    aircraft are agents (``aircraft_0``, ...), each flying to its airway's end. Every agent is in
+    ``agents`` from ``reset`` and leaves it on the step it finishes (docs/model.md §8.4).
+    Background traffic is part of the environment, not agents.
 
     | | |
     |---|---|
-    | Agents | ``ownship_0`` plus ``intruder_0..n-1`` (n = learning intruders of the scenario) |
+    | Agents | ``ownship_0``, ``intruder_i`` (learning intruders), ``aircraft_i`` (airway agents) |
     | Action space | ``Discrete(27)`` per agent |
     | Observation | ``Dict(observation=Box(F,) float32, action_mask=Box(27,) int8)`` |
     | Observation size | F = 12 + 10 K (K = 3 nearest aircraft by default: F = 42) |
@@ -154,7 +157,9 @@ class CDREnv(ParallelEnv):
     aircraft at the spawn level is within 20 km. The ownship starts at a uniform point of the
     boundary >= 20 km from every intruder (any level), at a uniform random level and 430 kt,
     heading for a goal uniform in [20, 380] km^2. Learning intruders start at the entry of their
-    airway, at 430 kt, on a level clear of same-level traffic within 20 km. Tactical scenarios
+    airway, at 430 kt, on a level clear of same-level traffic within 20 km. Controlled airway
+    aircraft are airway aircraft of the steady state drawn per episode, at 430 kt along their
+    airway. Tactical scenarios
     give explicit aircraft, start and goal instead.
 
     ## Episode End

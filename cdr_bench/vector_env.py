@@ -8,7 +8,7 @@ the trainers, the tactical search and the first-action analysis use it directly.
 ============  ===================================================================================
 what          shape and meaning
 ============  ===================================================================================
-agents        ``M`` controlled aircraft per episode: ``ownship_0`` (m = 0), then ``intruder_0..``
+agents        ``M`` controlled aircraft: ``ownship_0`` (m = 0), ``intruder_*``, ``aircraft_*``
 actions       ``(E, M)`` integers 0..26 (:mod:`cdr_bench.actions`); ignored for aircraft not flying
 observations  ``(E, M, F)`` float32, the layout of :mod:`cdr_bench.sim.observation`
 action masks  ``(E, M, 27)`` int8, 1 = feasible
@@ -102,7 +102,11 @@ def _read_only(a: NDArray[Any]) -> NDArray[Any]:
 
 def agent_ids(config: ScenarioConfig) -> list[str]:
     """Agent names of the controlled aircraft, in simulator order (m = 0, 1, ...)."""
-    return ["ownship_0"] + [f"intruder_{i}" for i in range(config.n_learning_intruders)]
+    return (
+        ["ownship_0"]
+        + [f"intruder_{i}" for i in range(config.n_learning_intruders)]
+        + [f"aircraft_{i}" for i in range(config.traffic.controlled)]
+    )
 
 
 def observation_space(config: ScenarioConfig) -> spaces.Dict:

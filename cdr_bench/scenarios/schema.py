@@ -38,6 +38,8 @@ MAX_AIRCRAFT = 256
 """Most explicitly placed background aircraft."""
 MAX_LEARNING_INTRUDERS = 16
 """Most learning intruders."""
+MAX_CONTROLLED_TRAFFIC = 1024
+"""Most controlled airway aircraft (``traffic.controlled``; 64 airways x 16 per airway)."""
 MAX_COORD_KM = 10_000.0
 """Every coordinate is within [-MAX_COORD_KM, MAX_COORD_KM] km (twice the largest sector)."""
 MAX_NAME_CHARS = 128
@@ -262,6 +264,19 @@ class TrafficConfig:
         200.0,
         default=20.0,
     )
+    controlled: int = _spec(
+        "airway aircraft in the sky at the start that are controlled (agents aircraft_0, ...), "
+        "drawn per episode among the routes x per_route; each flies to its airway's end as its "
+        "goal",
+        0,
+        MAX_CONTROLLED_TRAFFIC,
+        default=0,
+    )
+    spawn: bool = _spec(
+        "airways spawn new (background) aircraft; false: no spawns, the sky empties as its "
+        "aircraft leave",
+        default=True,
+    )
 
 
 @dataclass(frozen=True)
@@ -333,8 +348,15 @@ class ScenarioConfig:
     reward: RewardConfig = _spec("reward weights", default_factory=RewardConfig)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain-JSON form (tuples become lists)."""
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+        """Plain-JSON form (tuples become lists). Fields of :data:`OMITTED_AT_DEFAULT` are left
+        out at their default, so that adding them changed no scenario's :meth:`config_hash`."""
+        out = json.loads(json.dumps(dataclasses.asdict(self)))
+        for section, name in OMITTED_AT_DEFAULT:
+            part = out[section]
+            default = next(f for f in dataclasses.fields(TrafficConfig) if f.name == name).default
+            if part.get(name) == default:
+                del part[name]
+        return out
 
     def config_hash(self) -> str:
         """SHA-256 of the canonical JSON form: identifies the dynamics of the scenario."""
@@ -348,6 +370,17 @@ class ScenarioConfig:
     @property
     def n_route_intruders(self) -> int:
         return self.traffic.routes * self.traffic.per_route
+
+    @property
+    def n_controlled(self) -> int:
+        """Controlled aircraft (agents) per episode: the ownship, the learning intruders and
+        the controlled airway aircraft (docs/model.md §8.4)."""
+        return 1 + len(self.learning_intruders) + self.traffic.controlled
+
+
+OMITTED_AT_DEFAULT = (("traffic", "controlled"), ("traffic", "spawn"))
+"""(section, field) pairs that :meth:`ScenarioConfig.to_dict` leaves out at their default (all
+in :class:`TrafficConfig`): fields added after results had been published."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -605,6 +638,14 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
     if cfg.traffic.routes > len(cfg.airways):
         out.append(
             ("traffic.routes", f"expected at most {len(cfg.airways)} (the number of airways)")
+        )
+    if cfg.traffic.controlled > cfg.n_route_intruders:
+        out.append(
+            (
+                "traffic.controlled",
+                f"expected at most routes x per_route = {cfg.n_route_intruders} (the airway "
+                "aircraft in the sky at the start)",
+            )
         )
     for i, li in enumerate(cfg.learning_intruders):
         if li.airway >= len(cfg.airways):

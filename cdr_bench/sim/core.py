@@ -2,8 +2,9 @@
 
 Two kinds of aircraft share the sky:
 
-* **controlled** aircraft (index ``m`` in ``0..M-1``): the ownship (``m = 0``) and the learning
-  intruders (``m = 1..``). They take one of the 27 actions every step.
+* **controlled** aircraft (index ``m`` in ``0..M-1``): the ownship (``m = 0``), the learning
+  intruders (``m = 1..L``) and the controlled airway aircraft (``m = L+1..``,
+  ``traffic.controlled``). They take one of the 27 actions every step.
 * **background** aircraft (index ``b`` in ``0..B-1``): airway traffic (``R`` routes times ``C``
   slots each, first) and explicitly placed aircraft (last). They fly straight at constant speed
   and level and never react.
@@ -154,8 +155,8 @@ class Simulator:
         self.X = len(cfg.aircraft)
         self.B = B = R * self.C + self.X
 
-        # Controlled aircraft: ownship + learning intruders.
-        self.M = M = 1 + cfg.n_learning_intruders
+        # Controlled aircraft: ownship, learning intruders, controlled airway aircraft.
+        self.M = M = cfg.n_controlled
         self.N = N = B + M
         o = cfg.ownship
         self.min_speed_kt, self.max_speed_kt = o.min_speed_kt, o.max_speed_kt
@@ -213,6 +214,7 @@ class Simulator:
                 np.inf if cfg.sector.boundary_margin_km is None else cfg.sector.boundary_margin_km,
             ),
             (k.P_MAX_STEPS, float(self.max_steps)),
+            (k.P_SPAWN, float(cfg.traffic.spawn)),
         ):
             fp[index] = value
         fp.flags.writeable = False
@@ -221,8 +223,9 @@ class Simulator:
 
         X = self.X
         li = cfg.learning_intruders
-        li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(M - 1, 2)
-        li_goal = np.array([cfg.airways[x.airway].end_km for x in li], float).reshape(M - 1, 2)
+        L = len(li)
+        li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(L, 2)
+        li_goal = np.array([cfg.airways[x.airway].end_km for x in li], float).reshape(L, 2)
         li_vec = li_goal - li_start
         li_len = np.sqrt(li_vec[:, 0] * li_vec[:, 0] + li_vec[:, 1] * li_vec[:, 1])
         own = np.zeros(9)
@@ -270,6 +273,7 @@ class Simulator:
             route_unit=self.route_unit,
             route_len=self.route_length_km,
             route_len_slot=np.repeat(self.route_length_km, self.C),
+            route_end=route_end,
             spacing=self.route_spacing_km,
             x_pos=x_pos,
             x_dir=x_dir,

@@ -92,8 +92,9 @@ N_FLAGS = 6
     P_LOS_TERMINATES,
     P_BOUNDARY_MARGIN,
     P_MAX_STEPS,
-) = range(28)
-N_FLOAT_PARAMS = 28
+    P_SPAWN,
+) = range(29)
+N_FLOAT_PARAMS = 29
 
 # Explicit ownship start (the ``own_fixed`` array; ``has`` = 0 for a random start).
 O_HAS, O_X, O_Y, O_DIR_X, O_DIR_Y, O_SPEED, O_LEVEL, O_GOAL_X, O_GOAL_Y = range(9)
@@ -154,6 +155,8 @@ class Constants(NamedTuple):
     """(R,) airway lengths, km"""
     route_len_slot: np.ndarray
     """(R * C,) the length of each slot's airway, km"""
+    route_end: np.ndarray
+    """(R, 2) airway exit points, km (the goals of controlled airway aircraft)"""
     spacing: np.ndarray
     """(R,) arc between successive aircraft of an airway, km"""
     x_pos: np.ndarray
@@ -169,11 +172,11 @@ class Constants(NamedTuple):
     x_enc_level: np.ndarray
     """(X, 4) the levels an encounter draws from: count, then the levels"""
     li_start: np.ndarray
-    """(M - 1, 2) learning intruders: starts (their airway's entry), km"""
+    """(L, 2) the L learning intruders: starts (their airway's entry), km"""
     li_goal: np.ndarray
-    """(M - 1, 2) their goals (their airway's exit), km"""
+    """(L, 2) their goals (their airway's exit), km"""
     li_dir: np.ndarray
-    """(M - 1, 2) their heading vectors"""
+    """(L, 2) their heading vectors"""
     own_fixed: np.ndarray
     """(9,) an explicit ownship start, indices ``O_*``"""
     per_route: int
@@ -418,14 +421,51 @@ def _near_controlled(e, x, y, clearance, s, B, upto):
 
 
 @njit(cache=True)
+def _control_traffic(e, rs, s, c, B, first, M):
+    """Controlled aircraft ``first..M-1`` take over airway aircraft of the steady state: a
+    uniform draw of ``M - first`` of the ``per_route`` aircraft of every airway (partial
+    Fisher-Yates over the slots in route order, one draw per aircraft; none when there are
+    none to place). Each keeps its position and level, flies along its airway at the start
+    speed with the airway's exit as its goal, and its background slot leaves the sky. False
+    when fewer airway aircraft are in the sky than are to be controlled."""
+    T = M - first
+    if T <= 0:
+        return True
+    R = c.route_start.shape[0]
+    cand = np.empty(R * c.per_route, dtype=np.int64)
+    n = 0
+    for r in range(R):
+        for j in range(c.per_route):
+            if s.active[e, r * c.C + j]:
+                cand[n] = r * c.C + j
+                n += 1
+    if n < T:
+        return False
+    for i in range(T):
+        j = i + _below(rs, n - i)
+        cand[i], cand[j] = cand[j], cand[i]
+        slot = cand[i]
+        r = slot // c.C
+        m = first + i
+        s.pos[e, B + m, 0], s.pos[e, B + m, 1] = s.pos[e, slot, 0], s.pos[e, slot, 1]
+        s.ac_dir[e, m, 0], s.ac_dir[e, m, 1] = c.route_unit[r, 0], c.route_unit[r, 1]
+        s.ac_speed[e, m] = c.fp[P_START_SPEED]
+        s.level[e, B + m] = s.level[e, slot]
+        s.ac_goal[e, m, 0], s.ac_goal[e, m, 1] = c.route_end[r, 0], c.route_end[r, 1]
+        s.active[e, slot] = False
+    return True
+
+
+@njit(cache=True)
 def _place_controlled(e, rs, s, c, B):
     """Learning intruders at the entry of their airway on a level clear of traffic, then the
-    ownship (explicit, or on the boundary clear of traffic heading for a random goal).
+    controlled airway aircraft (:func:`_control_traffic`), then the ownship (explicit, or on
+    the boundary clear of traffic and of every controlled aircraft, heading for a random goal).
     False when no clear start was found (the caller redraws the traffic)."""
     clearance = c.fp[P_START_CLEARANCE]
     M = s.ac_dir.shape[1]
     perm = np.empty(N_LEVELS, dtype=np.int64)
-    for k in range(1, M):
+    for k in range(1, 1 + c.li_start.shape[0]):
         sx, sy = c.li_start[k - 1, 0], c.li_start[k - 1, 1]
         for i in range(N_LEVELS):
             perm[i] = i
@@ -445,6 +485,9 @@ def _place_controlled(e, rs, s, c, B):
         s.ac_speed[e, k] = c.fp[P_START_SPEED]
         s.level[e, B + k] = found
         s.ac_goal[e, k, 0], s.ac_goal[e, k, 1] = c.li_goal[k - 1, 0], c.li_goal[k - 1, 1]
+
+    if not _control_traffic(e, rs, s, c, B, 1 + c.li_start.shape[0], M):
+        return False
 
     if c.own_fixed[O_HAS] != 0.0:
         s.pos[e, B, 0], s.pos[e, B, 1] = c.own_fixed[O_X], c.own_fixed[O_Y]
@@ -546,6 +589,8 @@ def _spawn_traffic(e, s, c, acting):
     step_km = c.fp[P_TRAFFIC_STEP]
     speed = c.fp[P_TRAFFIC_SPEED]
     clearance = c.fp[P_SPAWN_CLEARANCE]
+    if c.fp[P_SPAWN] == 0.0:
+        return
     for r in range(R):
         s.route_last[e, r] += step_km
         if s.route_last[e, r] < c.spacing[r]:

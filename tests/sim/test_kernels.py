@@ -29,7 +29,7 @@ def _rollout(sim: Simulator, steps: int, seed: int = 0) -> list[np.ndarray]:
     return frames
 
 
-@pytest.mark.parametrize("name", ["high", "marl/medium-4", "tactical/crossing"])
+@pytest.mark.parametrize("name", ["high", "marl/medium-4", "marl/high-24", "tactical/crossing"])
 def test_an_episode_is_the_same_in_a_batch_of_one_and_in_a_big_batch(name):
     cfg = load_scenario(name)
     seeds = [11, 12, 13, 14, 15]
