@@ -16,7 +16,7 @@ from typing import Any
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import results as rf
 from cdr_bench.evaluate.loader import AgentError, agent_identity, resolve_agent_path
-from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics
+from cdr_bench.evaluate.metrics import latency_summary, scenario_metrics, system_metrics
 from cdr_bench.evaluate.remote import AgentOptions, check_timeout
 from cdr_bench.evaluate.runner import (
     DEFAULT_BATCH_SIZE,
@@ -253,6 +253,9 @@ def evaluate(
                 "metrics": scenario_metrics(eps),
             }
         )
+        system = system_metrics(eps)
+        if system is not None:
+            scenarios_out[-1]["system_metrics"] = system
         latency[cid] = latency_summary(
             [x for b in batches for x in b["timing"]["per_decision_ms"]],
             [x for b in batches for x in b["timing"]["per_call_ms"]],

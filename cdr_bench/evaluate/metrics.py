@@ -94,6 +94,26 @@ def bootstrap_mean_interval(
     return (float(lo), float(hi))
 
 
+def ratio_interval(
+    nd: NDArray[np.floating], resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of Σ numerator / Σ denominator over units (rows of
+    ``nd``: numerator, denominator), the units resampled with replacement (the indices of
+    :func:`resample_indices`); resamples whose denominators sum to 0 are left out. ``(nan,
+    nan)`` without a unit with a denominator."""
+    x = np.asarray(nd, dtype=float).reshape(-1, 2)
+    if not (x[:, 1] > 0).any():
+        return (math.nan, math.nan)
+    if x.shape[0] == 1:
+        v = x[0, 0] / x[0, 1]
+        return (v, v)
+    sums = x[resample_indices(x.shape[0], resamples, seed)].sum(axis=1)
+    ok = sums[:, 1] > 0
+    ratios = sums[ok, 0] / sums[ok, 1]
+    lo, hi = np.percentile(ratios, [2.5, 97.5])
+    return (float(lo), float(hi))
+
+
 @functools.lru_cache(maxsize=8)
 def resample_indices(
     n: int, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
@@ -159,6 +179,7 @@ Record = Mapping[str, Any]
 
 AGGREGATES = ("rate", "mean", "per_h")
 FORMATS = ("rate", "mean", "per_h")
+SCOPES = ("aircraft", "system")
 
 
 @dataclass(frozen=True)
@@ -187,9 +208,10 @@ class Metric:
     """``rate``, ``mean`` or ``per_h`` (see the class docstring)."""
     higher: bool
     """Higher is better."""
-    value: Callable[[Record], Any]
-    """The per-record fact (see the class docstring)."""
-    over: Callable[[Record], Any] | None = None
+    value: Callable[[Any], Any]
+    """The per-record fact (see the class docstring; a system metric's reads an episode's
+    records, :attr:`scope`)."""
+    over: Callable[[Any], Any] | None = None
     """rate: trials of the record (None: 1); mean: whether the record counts (None: every
     record); per_h: exposure of the record in seconds."""
     short: str = ""
@@ -202,10 +224,19 @@ class Metric:
     significant digits); empty: the aggregate's."""
     doc: str = ""
     """What it measures, in a sentence."""
+    scope: str = "aircraft"
+    """``aircraft``: ``value`` and ``over`` read one per-aircraft record, and the records of a
+    role are the trials (the class docstring). ``system``: they read the records of one
+    episode's controlled aircraft together (every role), and the episode is the unit:
+    :meth:`compute_system`."""
 
     def __post_init__(self) -> None:
         if self.aggregate not in AGGREGATES:
             raise ValueError(f"metric {self.key}: aggregate must be one of {AGGREGATES}")
+        if self.scope not in SCOPES:
+            raise ValueError(f"metric {self.key}: scope must be one of {SCOPES}")
+        if self.scope == "system" and self.over is None:
+            raise ValueError(f"metric {self.key}: a system metric needs its denominator (over)")
         if self.fmt and self.fmt not in FORMATS:
             raise ValueError(f"metric {self.key}: fmt must be one of {FORMATS}")
         if self.aggregate == "per_h" and self.over is None:
@@ -232,12 +263,46 @@ class Metric:
         hours = sum(float(over(r)) for r in records) / 3600.0
         return poisson_rate(sum(int(f(r)) for r in records), hours)
 
+    def compute_system(self, episodes: Sequence[Sequence[Record]]) -> dict[str, Any]:
+        """A system metric over episodes (each the list of its controlled aircraft's records):
+        the ratio Σ value / Σ over of the per-episode numerators and denominators (rate: events
+        / trials; mean: a sum / its count; per_h: events / seconds of exposure, per hour), with
+        the 95 % percentile-bootstrap interval over episodes (:func:`ratio_interval`: the
+        aircraft of one episode are not independent, so the episode is resampled whole).
+        Reported like the aircraft metrics (``count`` and ``n`` for a rate, ``n`` for a mean,
+        ``count`` and ``exposure_h`` per hour), plus ``episodes``: those with a denominator."""
+        if self.scope != "system" or self.over is None:
+            raise ValueError(f"metric {self.key} is not a system metric")
+        nd = np.array(
+            [[float(self.value(ep)), float(self.over(ep))] for ep in episodes], dtype=float
+        ).reshape(-1, 2)
+        if self.aggregate == "per_h":
+            nd[:, 1] /= 3600.0
+        num, den = float(nd[:, 0].sum()), float(nd[:, 1].sum())
+        lo, hi = ratio_interval(nd)
+        out: dict[str, Any] = {
+            "value": _r(num / den) if den > 0 else None,
+            "ci95": [_r(lo), _r(hi)],
+        }
+        if self.aggregate == "rate":
+            out |= {"count": int(round(num)), "n": int(round(den))}
+        elif self.aggregate == "mean":
+            out["n"] = int(round(den))
+        else:
+            out |= {"count": int(round(num)), "exposure_h": _r(den)}
+        out["episodes"] = int((nd[:, 1] > 0).sum())
+        return out
+
     def paired(self, record: Record) -> tuple[float, float]:
         """``(numerator, denominator)`` of one record for the paired comparison, which sums both
         over an episode's records and takes their ratio: events and trials (rates; per
         episode: a binary outcome), the value where it counts and whether it counts (means),
         events and exposure in hours (per_h)."""
         f, over = self.value, self.over
+        if self.scope == "system":  # ``record``: the records of one episode
+            assert over is not None
+            den = float(over(record))
+            return float(f(record)), den / 3600.0 if self.aggregate == "per_h" else den
         if self.aggregate == "rate":
             return float(f(record)), 1.0 if over is None else float(over(record))
         if self.aggregate == "mean":
@@ -442,7 +507,143 @@ _BUILTIN: tuple[Metric, ...] = (
     ),
 )
 
-_REGISTRY: dict[str, Metric] = {m.key: m for m in _BUILTIN}
+
+# System metrics (docs/model.md §10.1.3): the records of one episode's controlled aircraft
+# together, the episode the unit.
+
+Episode = Sequence[Record]
+"""The records of one episode's controlled aircraft (every role)."""
+
+
+def _pair_events(kind: str) -> Callable[[Episode], float]:
+    """Pairs entering a LoS / NMAC in the episode, each pair once: the aircraft's events, less
+    half of those with another controlled aircraft (in both aircraft's records)."""
+    own, shared = f"{kind}_events", f"{kind}_events_ac"
+    return lambda ep: sum(r[own] for r in ep) - sum(r.get(shared, 0) for r in ep) / 2
+
+
+def _delays(ep: Episode) -> list[float]:
+    return [r["flight_s"] - r["direct_s"] for r in ep if _success(r)]
+
+
+def _delay_spread(ep: Episode) -> float:
+    d = _delays(ep)
+    return float(np.std(d)) if len(d) >= 2 else 0.0
+
+
+def _flights(ep: Episode) -> int:
+    return len(ep)
+
+
+def _flight_s(ep: Episode) -> float:
+    return float(sum(r["flight_s"] for r in ep))
+
+
+_SYSTEM: tuple[Metric, ...] = (
+    Metric(
+        "system_success_rate",
+        "flights success",
+        "rate",
+        True,
+        lambda ep: sum(_success(r) for r in ep),
+        _flights,
+        short="success",
+        scope="system",
+        doc="Share of the controlled flights that reached their goal.",
+    ),
+    Metric(
+        "system_clean_rate",
+        "clean flights",
+        "rate",
+        True,
+        lambda ep: sum(_success(r) and not r["los"] for r in ep),
+        _flights,
+        short="clean",
+        scope="system",
+        doc="Share of the controlled flights that reached their goal with no LoS at all.",
+    ),
+    Metric(
+        "system_clean_episode_rate",
+        "clean episodes",
+        "rate",
+        True,
+        lambda ep: not any(r["los"] for r in ep),
+        lambda ep: 1,
+        short="clean ep",
+        scope="system",
+        doc="Share of the episodes in which no controlled aircraft had a LoS.",
+    ),
+    Metric(
+        "system_los_per_flight_hour",
+        "LoS / flight h",
+        "per_h",
+        False,
+        _pair_events("los"),
+        _flight_s,
+        short="LoS/h",
+        scope="system",
+        doc="Pairs entering a LoS (controlled-controlled once, controlled-background) per hour "
+        "flown by the controlled aircraft.",
+    ),
+    Metric(
+        "system_nmac_per_flight_hour",
+        "NMAC / flight h",
+        "per_h",
+        False,
+        _pair_events("nmac"),
+        _flight_s,
+        short="NMAC/h",
+        scope="system",
+        doc="Pairs entering an NMAC per hour flown by the controlled aircraft.",
+    ),
+    Metric(
+        "system_delay_s",
+        "delay s",
+        "mean",
+        False,
+        lambda ep: sum(_delays(ep)),
+        lambda ep: len(_delays(ep)),
+        short="delay s",
+        scope="system",
+        doc="Flight time beyond the direct time, per successful flight.",
+    ),
+    Metric(
+        "system_extra_path_km",
+        "extra path km",
+        "mean",
+        False,
+        lambda ep: sum(r["path_km"] - r["direct_km"] for r in ep if _success(r)),
+        lambda ep: sum(_success(r) for r in ep),
+        short="extra km",
+        scope="system",
+        doc="Path flown beyond the direct distance, per successful flight.",
+    ),
+    Metric(
+        "system_manoeuvres",
+        "manoeuvres",
+        "mean",
+        False,
+        lambda ep: sum(r["manoeuvres"] for r in ep),
+        _flights,
+        short="manoeuvres",
+        scope="system",
+        doc="Decisions other than hold, per controlled flight.",
+    ),
+    Metric(
+        "system_delay_spread_s",
+        "delay spread s",
+        "mean",
+        False,
+        _delay_spread,
+        lambda ep: len(_delays(ep)) >= 2,
+        short="spread s",
+        scope="system",
+        doc="Standard deviation of the delay across an episode's successful flights (who pays "
+        "for the resolutions), averaged over the episodes with at least two.",
+    ),
+)
+
+_REGISTRY: dict[str, Metric] = {m.key: m for m in (*_BUILTIN, *_SYSTEM)}
 _RESERVED = {"episodes"}
 
 
@@ -474,10 +675,13 @@ class MetricView(Sequence[Metric]):
         return f"MetricView({[m.key for m in self._now()]})"
 
 
-METRICS = MetricView()
-"""Every metric, in display order: the built-in ones (docs/model.md §10, §10.1), then those
-added with :func:`register_metric`."""
-MAIN_METRICS = MetricView(lambda m: not m.detail)
+METRICS = MetricView(lambda m: m.scope == "aircraft")
+"""Every metric of a role's records, in display order: the built-in ones (docs/model.md §10,
+§10.1), then those added with :func:`register_metric`."""
+SYSTEM_METRICS = MetricView(lambda m: m.scope == "system")
+"""The system metrics (docs/model.md §10.1.3): over every controlled aircraft of an episode,
+the episode the unit; in a result's ``system_metrics`` where an episode has several."""
+MAIN_METRICS = MetricView(lambda m: m.scope == "aircraft" and not m.detail)
 """The metrics that are columns of the leaderboard's pages and the docs' tables."""
 
 
@@ -494,7 +698,7 @@ def register_metric(metric: Metric) -> Metric:
 
 def unregister_metric(key: str) -> None:
     """Remove a metric added with :func:`register_metric` (the built-in ones stay)."""
-    if key in {m.key for m in _BUILTIN}:
+    if key in {m.key for m in (*_BUILTIN, *_SYSTEM)}:
         raise ValueError(f"metric {key!r} is built in")
     if key not in _REGISTRY:
         raise KeyError(f"no metric {key!r}")
@@ -519,18 +723,39 @@ def group_metrics(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+ROLES = ("ownship", "intruders", "traffic")
+"""The roles scored apart: the ownship, learning intruders, controlled airway aircraft."""
+
+
 def role_of(aircraft_id: str) -> str:
-    """``ownship`` for ``ownship_0``, ``intruders`` for learning intruders."""
-    return "ownship" if aircraft_id.startswith("ownship") else "intruders"
+    """``ownship`` for ``ownship_0``, ``traffic`` for controlled airway aircraft
+    (``aircraft_i``), ``intruders`` for learning intruders."""
+    if aircraft_id.startswith("ownship"):
+        return "ownship"
+    return "traffic" if aircraft_id.startswith("aircraft") else "intruders"
 
 
 def scenario_metrics(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Metrics of the ownship and (where present) of the learning intruders, reported apart."""
-    groups: dict[str, list[dict[str, Any]]] = {"ownship": [], "intruders": []}
+    """Metrics of the ownship and (where present) of the learning intruders and of the
+    controlled airway aircraft, reported apart."""
+    groups: dict[str, list[dict[str, Any]]] = {role: [] for role in ROLES}
     for ep in episodes:
         for ac in ep["aircraft"]:
             groups[role_of(ac["id"])].append(ac)
     return {role: group_metrics(recs) for role, recs in groups.items() if recs}
+
+
+def system_metrics(episodes: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """Every system metric (:data:`SYSTEM_METRICS`) over a scenario's episodes, after
+    ``episodes`` and ``flights``; None where no episode has more than one controlled
+    aircraft."""
+    eps = [ep["aircraft"] for ep in episodes]
+    if not eps or max(len(a) for a in eps) < 2:
+        return None
+    out: dict[str, Any] = {"episodes": len(eps), "flights": sum(len(a) for a in eps)}
+    for m in SYSTEM_METRICS:
+        out[m.key] = m.compute_system(eps)
+    return out
 
 
 def latency_summary(per_decision_ms: Sequence[float], per_call_ms: Sequence[float]) -> dict:

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from cdr_bench.evaluate.metrics import METRICS, Metric
+from cdr_bench.evaluate.metrics import METRICS, SYSTEM_METRICS, Metric
 
 Column = Metric
 """A column of the results tables is a registered metric (:class:`~cdr_bench.evaluate.metrics.
@@ -149,15 +149,39 @@ def _compact_head() -> list[str]:
     return ["scenario", "aircraft", "episodes", *[c.short for c in COLUMNS if c.short]]
 
 
+def _system_rows(result: dict[str, Any], ci: bool, label: str | None = None) -> Rows:
+    rows = []
+    for sc in result["scenarios"]:
+        m = sc.get("system_metrics")
+        if not m:
+            continue
+        row = [Cell(label)] if label is not None else []
+        row += [Cell(sc["id"]), Cell(str(m["episodes"])), Cell(str(m["flights"]))]
+        row += [Cell(fmt_metric(c.kind, m[c.key], ci)) for c in SYSTEM_METRICS]
+        rows.append(row)
+    return rows
+
+
+def _system_head(short: bool) -> list[str]:
+    cols = [(c.short or c.header) if short else c.header for c in SYSTEM_METRICS]
+    return ["scenario", "episodes", "flights", *cols]
+
+
 def summary_text(result: dict[str, Any], wide: bool = False) -> str:
     """Every scenario and role of one result, point values (intervals are in the JSON): the
     paper's five metrics and clean success in under 100 columns, or every column with
-    ``wide``."""
+    ``wide``; then, for scenarios with several controlled aircraft, the system metrics
+    (docs/model.md §10.1.3)."""
     if wide:
         table = text_table(_result_head(), _result_rows(result, ci=False))
     else:
         table = text_table(_compact_head(), _result_rows(result, ci=False, compact=True))
-    return f"agent {result['agent']['name']} ({result['agent']['path']})\n{table}"
+    out = f"agent {result['agent']['name']} ({result['agent']['path']})\n{table}"
+    system = _system_rows(result, ci=False)
+    if system:
+        out += "\nsystem (every controlled aircraft; per flight unless stated)\n"
+        out += text_table(_system_head(short=True), system, numeric_from=1)
+    return out
 
 
 REPORT_NOTE = (
@@ -170,6 +194,16 @@ REPORT_NOTE = (
     "and delay over successful flights, severity over flights with a LoS; docs/model.md §10.1). "
     "Latency is per decision (one batched call / "
     "decisions in it), in ms, machine-dependent."
+)
+
+
+SYSTEM_NOTE = (
+    "System metrics, where an episode has several controlled aircraft: every controlled aircraft "
+    "of an episode together (ownship, learning intruders, controlled traffic), the episode the "
+    "unit (values are ratios of per-episode sums; 95 % intervals bootstrap the episodes). LoS "
+    "and NMAC count pairs once, per hour flown by the controlled aircraft; delay and extra path "
+    "per successful flight; delay spread: the standard deviation of delay across an episode's "
+    "successful flights (docs/model.md §10.1.3)."
 )
 
 
@@ -186,4 +220,10 @@ def report_markdown(results: list[tuple[str, dict[str, Any]]]) -> str:
         for p, r in results
     )
     table = md_table(["agent", *_result_head()], rows, numeric_from=3)
+    system: Rows = []
+    for _path, res in results:
+        system += _system_rows(res, ci=True, label=res["agent"]["name"])
+    if system:
+        head = ["agent", *_system_head(short=False)]
+        table += f"\n\n{SYSTEM_NOTE}\n\n" + md_table(head, system, numeric_from=2)
     return f"# cdr-bench results\n\n{REPORT_NOTE}\n\n{table}\n\nResult files:\n\n{files}\n"

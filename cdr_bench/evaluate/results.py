@@ -382,12 +382,20 @@ class PartialLog:
         resume_key_path(self.path).unlink(missing_ok=True)
 
 
+COMPUTED_KEYS = ("metrics", "system_metrics")
+"""What :func:`read_result` computes into each scenario from the per-episode log (never
+written): the metrics per role and, where an episode has several controlled aircraft, the
+system metrics."""
+
+
 def strip_metrics(result: dict[str, Any]) -> dict[str, Any]:
-    """``result`` without what :func:`read_result` computes (each scenario's ``metrics``)."""
+    """``result`` without what :func:`read_result` computes (each scenario's ``metrics`` and
+    ``system_metrics``)."""
     return {
         **result,
         "scenarios": [
-            {k: v for k, v in s.items() if k != "metrics"} for s in result.get("scenarios", [])
+            {k: v for k, v in s.items() if k not in COMPUTED_KEYS}
+            for s in result.get("scenarios", [])
         ],
     }
 
@@ -420,14 +428,21 @@ def _parse_episodes(path: Path, text: str, digest: str) -> list[dict[str, Any]]:
 
 
 def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    """``result`` with each scenario's ``metrics`` computed from its per-episode records."""
-    from cdr_bench.evaluate.metrics import scenario_metrics
+    """``result`` with each scenario's ``metrics`` (and, where an episode has several
+    controlled aircraft, ``system_metrics``) computed from its per-episode records."""
+    from cdr_bench.evaluate.metrics import scenario_metrics, system_metrics
 
     by_id: dict[str, list[dict[str, Any]]] = {}
     for e in episodes:
         by_id.setdefault(e.get("scenario"), []).append(e)  # type: ignore[arg-type]
     for s in result.get("scenarios", []):
-        s["metrics"] = scenario_metrics(by_id.get(s.get("id"), []))
+        eps = by_id.get(s.get("id"), [])
+        s["metrics"] = scenario_metrics(eps)
+        system = system_metrics(eps)
+        if system is not None:
+            s["system_metrics"] = system
+        else:
+            s.pop("system_metrics", None)
     return result
 
 
@@ -475,7 +490,11 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
         )
     if not isinstance(data.get("scenarios"), list):
         raise ValueError(f"{p}: scenarios: expected a list")
-    stored = [s.get("id") for s in data["scenarios"] if isinstance(s, dict) and "metrics" in s]
+    stored = [
+        s.get("id")
+        for s in data["scenarios"]
+        if isinstance(s, dict) and any(k in s for k in COMPUTED_KEYS)
+    ]
     if stored and not legacy:  # schema 3 stored them; they are recomputed below all the same
         raise ValueError(
             f"{p}: scenario {str(stored[0])[:60]} carries stored metrics, which a result of "

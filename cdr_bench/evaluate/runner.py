@@ -173,6 +173,11 @@ def run_batch(
     # Field metrics (docs/model.md §10.1): events are pairs entering a state.
     los_events = np.zeros((E, M), dtype=np.int64)
     nmac_events = np.zeros((E, M), dtype=np.int64)
+    # The same, with other controlled aircraft only (recorded where there are several): a pair
+    # of controlled aircraft is in both of its records, and the system metrics count it once.
+    los_events_ac = np.zeros((E, M), dtype=np.int64)
+    nmac_events_ac = np.zeros((E, M), dtype=np.int64)
+    B = env.n_background
     los_steps = np.zeros((E, M), dtype=np.int64)
     conflict_events = np.zeros((E, M), dtype=np.int64)
     manoeuvres = np.zeros((E, M), dtype=np.int64)
@@ -257,6 +262,7 @@ def run_batch(
     def on_step(actions: np.ndarray, step: VectorStep) -> None:
         """The step's part of every metric (and of the traces)."""
         nonlocal steps, los, nmac, goal_r, safety_r, invalid, los_events, nmac_events
+        nonlocal los_events_ac, nmac_events_ac
         nonlocal los_steps, conflict_events, manoeuvres, path_km, flight_s
         nonlocal before_km, prev_los, prev_nmac, in_conflict, conflict_now
         manoeuvres += actions != HOLD
@@ -269,8 +275,13 @@ def run_batch(
         flight_s += np.where(res.acting, part * dt_s, 0.0)
         before_km = after_km.copy()
         los_with, nmac_with = res.los_with, res.nmac_with
-        los_events += (los_with & ~prev_los).sum(axis=2)
-        nmac_events += (nmac_with & ~prev_nmac).sum(axis=2)
+        new_los = los_with & ~prev_los
+        new_nmac = nmac_with & ~prev_nmac
+        los_events += new_los.sum(axis=2)
+        nmac_events += new_nmac.sum(axis=2)
+        if M > 1:
+            los_events_ac += new_los[..., B:].sum(axis=2)
+            nmac_events_ac += new_nmac[..., B:].sum(axis=2)
         prev_los, prev_nmac = los_with, nmac_with
         los_any = los_with.any(axis=2)
         los_steps += los_any
@@ -324,6 +335,9 @@ def run_batch(
                     "actions": encode_actions(decisions[e, m, : n_dec[e, m]]),
                 }
             )
+            if M > 1:
+                aircraft[-1]["los_events_ac"] = int(los_events_ac[e, m])
+                aircraft[-1]["nmac_events_ac"] = int(nmac_events_ac[e, m])
         episodes.append(
             {
                 "episode": start + e,
