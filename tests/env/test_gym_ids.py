@@ -17,7 +17,7 @@ TASKS = [(i, k, n) for i, k, n in cdr_bench.GYMNASIUM_TASKS if k]
 
 def test_every_single_agent_scenario_has_an_id() -> None:
     named = {k["scenario"] for _, k, _ in TASKS}
-    single = {s for s in list_scenarios() if not load_scenario(s).learning_intruders}
+    single = {s for s in list_scenarios() if load_scenario(s).n_controlled == 1}
     assert named == single
 
 
