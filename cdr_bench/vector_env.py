@@ -216,6 +216,7 @@ class VectorEnv:
     ``autoreset_when``) that an adapter may set on an env it is given.
     """
 
+    # class defaults too: a VectorEnv pickled before these settings existed unpickles without them
     autoreset_seeds: Callable[[int], Any] | None = None
     autoreset_when: Callable[[StepResult], NDArray[np.bool_]] | None = None
 
