@@ -20,7 +20,7 @@ from cdr_bench.actions import HOLD, N_ACTIONS
 from cdr_bench.env import CDREnv
 from cdr_bench.errors import ActionError, short_repr
 from cdr_bench.scenarios import ScenarioConfig
-from cdr_bench.sim import OUTCOME_NAMES
+from cdr_bench.sim import OUTCOME_NAMES, StepResult
 from cdr_bench.vector_env import VectorEnv
 
 
@@ -97,7 +97,8 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
     ``infos["final_info"]``; ``infos["_final_obs"]`` flags the slots), as Gymnasium's own vector
     envs do. Feasible actions: ``infos["action_mask"]`` (N, 27) and :meth:`action_masks`.
     Learning intruders of the scenario, if any, hold; the episode ends with the ownship's
-    flight.
+    flight. The restart is the batched env's auto-reset (:class:`VectorEnv`, ``autoreset_when``
+    ending the episode with the ownship's flight), episode seeds from its stream.
     """
 
     metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP, "render_modes": []}
@@ -114,7 +115,13 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
             raise ValueError("the vector env does not render; use gymnasium.make for one env")
         if max_episode_steps is not None:  # gymnasium.make_vec passes the id's horizon
             overrides["time"] = {**overrides.get("time", {}), "max_steps": max_episode_steps}
-        self.vector = VectorEnv(scenario, num_envs=num_envs, **overrides)
+        self.vector = VectorEnv(
+            scenario,
+            num_envs=num_envs,
+            autoreset=True,
+            autoreset_when=self._ownship_finished,
+            **overrides,
+        )
         self.num_envs = num_envs
         self.single_observation_space = self.vector.single_observation_space["observation"]
         self.single_action_space = self.vector.single_action_space
@@ -125,6 +132,15 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
         self.render_mode = None
         self._actions = np.full((num_envs, self.vector.n_agents), HOLD, dtype=np.int64)
         self._masks = np.zeros((num_envs, N_ACTIONS), dtype=np.int8)
+
+    def _ownship_finished(self, res: StepResult) -> NDArray[np.bool_]:
+        """The batched env's auto-reset rule: an episode ends with its ownship's flight
+        (learning intruders still flying get the ``timeout`` outcome)."""
+        ended = res.terminated[:, 0] | res.truncated[:, 0]
+        still = np.flatnonzero(ended & self.vector.flying.any(axis=1))
+        if still.size:  # learning intruders still flying: the ownship's episode is over
+            self.vector.end_episodes(still)
+        return ended
 
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
@@ -155,19 +171,19 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
         if a.size and (a.min() < 0 or a.max() >= N_ACTIONS):
             raise ActionError(f"actions must be in 0..{N_ACTIONS - 1}, got {short_repr(a)}")
         self._actions[:, 0] = a
-        out = self.vector._step(self._actions)  # checked above
+        out = self.vector._step(self._actions)  # checked above; restarts the ended episodes
         res = out.result
         reward = out.reward[:, 0]
         term, trunc = out.terminated[:, 0].copy(), out.truncated[:, 0].copy()
         obs = out.obs[:, 0]
         masks = out.action_mask[:, 0]
         infos: dict[str, Any] = {}
-        ended = np.flatnonzero(term | trunc)
+        ended = np.flatnonzero(out.restarted)
         if ended.size:
             final_obs = np.empty(self.num_envs, dtype=object)
             final_info = np.empty(self.num_envs, dtype=object)
             for e in ended.tolist():
-                final_obs[e] = obs[e].copy()
+                final_obs[e] = out.final_obs[e, 0].copy()
                 final_info[e] = {
                     "outcome": OUTCOME_NAMES[int(res.outcome[e, 0])],
                     "episode_seed": int(out.final_episode_seeds[e]),
@@ -177,12 +193,6 @@ class OwnshipVectorEnv(gym.vector.VectorEnv):
             infos.update(
                 final_obs=final_obs, _final_obs=flag, final_info=final_info, _final_info=flag.copy()
             )
-            still = ended[self.vector.flying[ended].any(axis=1)]
-            if still.size:  # learning intruders still flying: the ownship's episode is over
-                self.vector.end_episodes(still)
-            new_obs, new_masks = self.vector.reset(episodes=ended)
-            obs[ended] = new_obs[ended, 0]
-            masks[ended] = new_masks[ended, 0]
         self._masks = masks
         infos["action_mask"] = masks
         infos["reward_terms"] = res.terms[:, 0]

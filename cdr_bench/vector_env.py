@@ -14,12 +14,21 @@ observations  ``(E, M, F)`` float32, the layout of :mod:`cdr_bench.sim.observati
 action masks  ``(E, M, 27)`` int8, 1 = feasible
 rewards       ``(E, M)`` float64, the sum of the 7 named terms (``step.result.terms``)
 auto-reset    optional: an episode whose last aircraft finished restarts within the same step;
-              the observation it ended with is in ``final_obs``
+              what it ended with is in ``final_obs``, ``final_action_mask`` and
+              ``final_episode_seeds``, the slots in ``restarted``
 ============  ===================================================================================
 
 Episode seeds: :meth:`VectorEnv.reset` takes one seed per episode (``seeds=``), or draws them from
 a stream seeded by ``seed=``; auto-reset draws from the same stream. The seed of the episode in
 slot ``e`` is ``episode_seeds[e]``. No mutable state is shared between instances.
+
+Auto-reset is the one restart of every face that restarts episodes as they end: the Gymnasium
+vector env, the trainers' :class:`~cdr_bench.rl.curriculum.CurriculumEnv` and the
+Stable-Baselines3 adapter (:func:`cdr_bench.wrappers.vector_env_to_sb3`) all use it. Two
+arguments adapt it: ``autoreset_when`` decides which episodes end with the step (the Gymnasium
+vector env ends an episode with its ownship's flight; the training env cuts long episodes and
+holds the restarts back on a promotion), ``autoreset_seeds`` supplies the seeds of the restarted
+episodes (the training env draws them from its own stream).
 
 State: besides what a step returns, the current state is public through read-only properties,
 so that nothing outside the environments reads the simulator (a test enforces it). They are
@@ -50,6 +59,7 @@ aircraft_in_sky        ``(E, N)`` bool: the slot holds an aircraft in the sky no
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,18 +78,19 @@ SEED_BOUND = 2**63
 """Episode seeds drawn from a stream are integers in 0..2**63-1."""
 
 
-def _checked_seeds(seeds: Any, n: int) -> NDArray[np.uint64]:
-    """``reset(seeds=...)``: ``n`` integers in 0..2**64-1 (one per started episode)."""
+def _checked_seeds(seeds: Any, n: int, source: str = "reset(seeds=...)") -> NDArray[np.uint64]:
+    """``reset(seeds=...)`` (or what ``source`` names): ``n`` integers in 0..2**64-1 (one per
+    started episode)."""
     try:
         values = list(np.asarray(seeds, dtype=object).reshape(-1))
     except (ValueError, TypeError):
         values = [seeds]
     if len(values) != n:
-        raise ArgumentError(f"reset(seeds=...) expects {n} seed(s), got {short_repr(seeds)}")
+        raise ArgumentError(f"{source} expects {n} seed(s), got {short_repr(seeds)}")
     for i, s in enumerate(values):
         if not _is_int(s, 0) or int(s) >= 2**64:
             raise ArgumentError(
-                f"reset(seeds=...)[{i}] = {short_repr(s)}: expected an integer in 0..2**64-1"
+                f"{source}[{i}] = {short_repr(s)}: expected an integer in 0..2**64-1"
             )
     return np.asarray([int(s) for s in values], dtype=np.uint64)
 
@@ -158,8 +169,14 @@ class VectorStep:
     final_obs: NDArray[np.float32]
     """(E, M, F) observations at the end of the step, before any auto-reset (``obs`` itself
     when nothing was reset)"""
+    final_action_mask: NDArray[np.int8]
+    """(E, M, 27) feasible actions at the end of the step, before any auto-reset
+    (``action_mask`` itself when nothing was reset)"""
     final_episode_seeds: NDArray[np.uint64]
     """(E,) seed of the episode each slot held during the step"""
+    restarted: NDArray[np.bool_]
+    """(E,) the episode ended with this step and auto-reset restarted the slot (all False
+    without auto-reset)"""
 
     obs = property(lambda self: self.result.obs, doc="(E, M, F) observations now")
     action_mask = property(lambda self: self.result.action_mask, doc="(E, M, 27) feasible now")
@@ -187,10 +204,25 @@ class VectorEnv:
     Args:
         scenario: a registry name, a YAML path or a :class:`ScenarioConfig`.
         num_envs: episodes stepped together (E).
-        autoreset: restart an episode in the step its last aircraft finishes.
+        autoreset: restart an episode in the step it ends (by default, when its last aircraft
+            finishes).
         seed: seeds the stream of episode seeds (``reset(seed=...)`` re-seeds it).
+        autoreset_seeds: ``n -> n`` seeds (integers in 0..2**64-1) of the episodes auto-reset
+            starts in a step, in slot order; default: the next ``n`` of the stream
+            (:meth:`draw_seeds`).
+        autoreset_when: ``result -> (E,) bool``, the episodes that end with the step (and
+            restart), called in every step after the simulator and before any restart with the
+            step's :class:`StepResult`; it may end episodes first (:meth:`end_episodes`).
+            Default: the episodes whose last aircraft finished (``result.episode_done``).
         overrides: nested scenario fields, validated like YAML.
+
+    The three auto-reset settings are public attributes (``autoreset``, ``autoreset_seeds``,
+    ``autoreset_when``) that an adapter may set on an env it is given.
     """
+
+    # class defaults too: a VectorEnv pickled before these settings existed unpickles without them
+    autoreset_seeds: Callable[[int], Any] | None = None
+    autoreset_when: Callable[[StepResult], NDArray[np.bool_]] | None = None
 
     def __init__(
         self,
@@ -199,12 +231,20 @@ class VectorEnv:
         *,
         autoreset: bool = False,
         seed: int | None = None,
+        autoreset_seeds: Callable[[int], Any] | None = None,
+        autoreset_when: Callable[[StepResult], NDArray[np.bool_]] | None = None,
         **overrides: Any,
     ):
         if not _is_int(num_envs, 1):
             raise ArgumentError(f"num_envs must be an integer >= 1, got {short_repr(num_envs)}")
         if not isinstance(autoreset, (bool, np.bool_)):
             raise ArgumentError(f"autoreset must be True or False, got {short_repr(autoreset)}")
+        for name, hook in (
+            ("autoreset_seeds", autoreset_seeds),
+            ("autoreset_when", autoreset_when),
+        ):
+            if hook is not None and not callable(hook):
+                raise ArgumentError(f"{name} must be None or a callable, got {short_repr(hook)}")
         if seed is not None and not _is_int(seed, 0):
             raise ArgumentError(f"seed must be None or an integer >= 0, got {short_repr(seed)}")
         num_envs = int(num_envs)
@@ -214,6 +254,8 @@ class VectorEnv:
         self.n_agents = self.sim.M
         self.agent_ids = agent_ids(self.config)
         self.autoreset = autoreset
+        self.autoreset_seeds = autoreset_seeds
+        self.autoreset_when = autoreset_when
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = spaces.Discrete(N_ACTIONS)
         self.observation_size = 12 + 10 * self.config.observation.neighbours
@@ -301,15 +343,37 @@ class VectorEnv:
         sim = self.sim
         res = sim.step(actions)
         obs, masks = res.obs, res.action_mask
-        final_obs, final_seeds = obs, self.episode_seeds
-        if self.autoreset and res.n_done:
-            final_obs, final_seeds = obs.copy(), self.episode_seeds.copy()
-            ended = np.flatnonzero(res.episode_done)
+        if not self.autoreset:
+            restart = np.zeros(self.num_envs, dtype=bool)
+        elif self.autoreset_when is None:
+            restart = res.episode_done
+        else:
+            restart = self._restart_mask(self.autoreset_when(res))
+        if not restart.any():
+            return VectorStep(res, obs, masks, self.episode_seeds, restart)
+        # The one restart of every auto-resetting face (module docstring).
+        final = VectorStep(res, obs.copy(), masks.copy(), self.episode_seeds.copy(), restart)
+        ended = np.flatnonzero(restart)
+        if self.autoreset_seeds is None:
             chosen = self.draw_seeds(ended.shape[0])
-            sim.reset(chosen, episodes=ended)
-            self.episode_seeds[ended] = chosen
-            sim.observe(ended, obs=obs, masks=masks)
-        return VectorStep(res, final_obs, final_seeds)
+        else:
+            chosen = _checked_seeds(
+                self.autoreset_seeds(ended.shape[0]), ended.shape[0], "autoreset_seeds(n)"
+            )
+        sim.reset(chosen, episodes=ended)
+        self.episode_seeds[ended] = chosen
+        sim.observe(ended, obs=obs, masks=masks)
+        return final
+
+    def _restart_mask(self, mask: Any) -> NDArray[np.bool_]:
+        """What ``autoreset_when`` returned, as an (E,) bool array (or an ArgumentError)."""
+        out = np.asarray(mask)
+        if out.dtype != np.bool_ or out.shape != (self.num_envs,):
+            raise ArgumentError(
+                f"autoreset_when must return a ({self.num_envs},) bool array, got "
+                f"{short_repr(mask)}"
+            )
+        return out
 
     def _require_reset(self, call: str) -> None:
         """:class:`~cdr_bench.errors.ResetNeeded` unless every slot has been started."""

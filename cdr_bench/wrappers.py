@@ -193,7 +193,8 @@ def sb3_vec_env(
     episode seeds (``venv.seed(s)`` re-seeds it at the next reset). See
     :func:`vector_env_to_sb3` for what a slot sees.
     """
-    return vector_env_to_sb3(VectorEnv(scenario, num_envs, seed=seed, **overrides), include_mask)
+    venv = VectorEnv(scenario, num_envs, autoreset=True, seed=seed, **overrides)
+    return vector_env_to_sb3(venv, include_mask)
 
 
 def vector_env_to_sb3(
@@ -202,10 +203,12 @@ def vector_env_to_sb3(
     continuous_actions: Callable[[np.ndarray], np.ndarray] | None = None,
     extra_features: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> Any:
-    """The Stable-Baselines3 ``VecEnv`` of a :class:`~cdr_bench.vector_env.VectorEnv` without
-    auto-reset (the adapter restarts its episodes), or of a source with the same face that
-    restarts them itself and reports ``final_action_mask`` (the trainers'
-    :class:`cdr_bench.rl.curriculum.CurriculumEnv`).
+    """The Stable-Baselines3 ``VecEnv`` of a :class:`~cdr_bench.vector_env.VectorEnv`, or of a
+    source with the same face (the trainers' :class:`cdr_bench.rl.curriculum.CurriculumEnv`).
+
+    Episodes restart through the source's auto-reset: the adapter switches on that of a
+    VectorEnv built without it (``source.autoreset = True``: restarted episodes take the next
+    seeds of its stream).
 
     * Each controlled aircraft of each episode is one slot (slot ``e * M + m``). An aircraft
       that has left gets a zero observation and zero reward ("black death") until its episode
@@ -243,6 +246,8 @@ def _adapter_class() -> type:
             continuous_actions: Callable[[np.ndarray], np.ndarray] | None,
             extra_features: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
         ):
+            if not source.autoreset:  # a VectorEnv: its auto-reset restarts the episodes
+                source.autoreset = True
             self.source, self.include_mask = source, include_mask
             self.to_index, self.extra = continuous_actions, extra_features
             self._shape = (source.num_envs, source.n_agents)
@@ -303,14 +308,10 @@ def _adapter_class() -> type:
             acting = st.result.acting.reshape(-1)
             self.ep_return += reward
             self.ep_length += acting
-            obs, masks = st.obs, st.action_mask
-            final_masks = getattr(st, "final_action_mask", masks)
-            if not self.source.autoreset and st.episode_done.any():
-                obs, masks = self.source.reset(episodes=np.flatnonzero(st.episode_done))
-            done = np.repeat(st.episode_done, self._shape[1])
+            done = np.repeat(st.restarted, self._shape[1])
             infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
             if done.any():
-                final = self._slots(st.final_obs, final_masks, acting)
+                final = self._slots(st.final_obs, st.final_action_mask, acting)
                 cut = acting & ~st.terminated.reshape(-1)
                 for i in np.flatnonzero(done):
                     infos[i] = {
@@ -320,7 +321,7 @@ def _adapter_class() -> type:
                     }
                 self.ep_return[done] = 0
                 self.ep_length[done] = 0
-            return self._observe(obs, masks), reward, done, infos
+            return self._observe(st.obs, st.action_mask), reward, done, infos
 
         def action_masks(self) -> np.ndarray:
             """(slots, 27) feasible actions (booleans) of the current observations."""

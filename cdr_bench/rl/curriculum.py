@@ -15,8 +15,9 @@ Pure numpy (no torch): the trainer modules import it at module level, and buildi
 
 from __future__ import annotations
 
+import copy
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -86,6 +87,7 @@ class TrainStep:
     was discarded by a promotion (n-step returns stop there)"""
     episode_done: NDArray[np.bool_]
     """(E,) the episode ended this step (and restarted)"""
+    restarted = property(lambda self: self.episode_done, doc="(E,) ``episode_done``")
     promoted: bool
     """the curriculum moved to the next stage at the end of this step (every episode restarted
     on the new stage)"""
@@ -101,9 +103,11 @@ class CurriculumEnv:
     nested scenario fields) in a :class:`VectorEnv`, restarted as they end, with episode seeds
     drawn from a stream seeded by ``seed``.
 
-    With a curriculum, the VectorEnv is rebuilt for the new stage on promotion and every episode
-    restarts (episodes in flight are discarded, not counted). The outcome of an episode is the
-    ownship's.
+    The restart is the VectorEnv's auto-reset: its ``autoreset_when`` is this env's rule (the
+    training cut, then the outcomes of the episodes that ended are recorded) and its
+    ``autoreset_seeds`` this env's stream. With a curriculum, a promotion holds the restarts
+    back, the VectorEnv is rebuilt for the new stage and every episode restarts (episodes in
+    flight are discarded, not counted). The outcome of an episode is the ownship's.
 
     Training-only departures from the benchmark's environment (0 turns each off):
 
@@ -120,7 +124,7 @@ class CurriculumEnv:
     """
 
     autoreset = True
-    """it restarts the episodes that end itself (as a VectorEnv with auto-reset)"""
+    """the episodes that end restart in the same step (its VectorEnv's auto-reset)"""
 
     def __init__(
         self,
@@ -144,6 +148,8 @@ class CurriculumEnv:
         self.recent: deque[int] = deque(maxlen=100)  # outcome codes of the last episodes
         self.outcomes: list[int] = []  # outcome codes of the episodes ended since the last read
         self.promotions: list[int] = []  # stages promoted to since the last read
+        # what the auto-reset rule found in the step: training truncations, ended flights, promoted
+        self._ends: tuple[NDArray[np.bool_], NDArray[np.bool_], bool] | None = None
         self._build()
 
     @property
@@ -161,7 +167,7 @@ class CurriculumEnv:
         return self.rng.integers(0, 2**62, n)
 
     def _build(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
-        self.env = VectorEnv(self.scenario, self.num_envs, **self.overrides)
+        self.env = self._attach(VectorEnv(self.scenario, self.num_envs, **self.overrides))
         self.config = self.env.config
         self.n_agents = self.env.n_agents
         self.observation_size = self.env.observation_size
@@ -182,17 +188,18 @@ class CurriculumEnv:
     def flying(self) -> NDArray[np.bool_]:
         return self.env.flying
 
-    def step(self, actions: NDArray[np.integer]) -> TrainStep:
-        """Advance every episode by one step with (E, M) actions; restart the episodes that
-        ended (on the next stage after a promotion)."""
+    def _attach(self, env: VectorEnv) -> VectorEnv:
+        """``env`` with this env's auto-reset: its rule and its seed stream."""
+        env.autoreset = True
+        env.autoreset_when, env.autoreset_seeds = self._episodes_ended, self._seeds
+        return env
+
+    def _episodes_ended(self, res: StepResult) -> NDArray[np.bool_]:
+        """The VectorEnv's auto-reset rule, called within its step: cut the episodes at the
+        training horizon, record the outcomes of the episodes with no aircraft left; restart
+        those, or none after a promotion (the VectorEnv is then rebuilt)."""
         env = self.env
-        st = env.step(actions)
-        res = st.result
-        failed = (res.outcome == LOS) | (res.outcome == NMAC) | (res.outcome == BOUNDARY)
-        penalty = self.failure_penalty * failed
-        if self.los_penalty:
-            penalty = penalty + self.los_penalty * self._separation_counts(res)
-        truncated = st.truncated
+        truncated = res.truncated
         flying = env.flying
         if self.max_episode_steps:
             cut = np.flatnonzero((env.episode_steps >= self.max_episode_steps) & flying.any(axis=1))
@@ -201,31 +208,42 @@ class CurriculumEnv:
                 truncated[cut] |= flying[cut]
                 env.end_episodes(cut)
                 flying = env.flying
-        flight_ended = res.acting & ~flying
-        ended = np.flatnonzero(~flying.any(axis=1))
+        ended = np.logical_not(flying.any(axis=1))
         outcomes = env.outcomes
         promoted = False
-        for e in ended:
+        for e in np.flatnonzero(ended):
             code = int(outcomes[e, 0])  # the ownship decides the episode
             self.outcomes.append(code)
             self.recent.append(code)
             self.episodes += 1
             if self.curriculum is not None and not promoted:
                 promoted = self.curriculum.record(code == SUCCESS)
-        episode_done = np.zeros(self.num_envs, dtype=bool)
+        self._ends = (truncated, res.acting & ~flying, promoted)
+        return np.zeros(self.num_envs, dtype=bool) if promoted else ended
+
+    def step(self, actions: NDArray[np.integer]) -> TrainStep:
+        """Advance every episode by one step with (E, M) actions; the episodes that ended
+        restart (on the next stage after a promotion)."""
+        self._ends = None
+        st = self.env.step(actions)  # its auto-reset calls _episodes_ended
+        assert self._ends is not None
+        truncated, flight_ended, promoted = self._ends
+        res = st.result
+        failed = (res.outcome == LOS) | (res.outcome == NMAC) | (res.outcome == BOUNDARY)
+        penalty = self.failure_penalty * failed
+        if self.los_penalty:
+            penalty = penalty + self.los_penalty * self._separation_counts(res)
         if promoted:
             assert self.curriculum is not None
             self.promotions.append(self.curriculum.stage)
             obs, masks = self._build()
-            episode_done[:] = True
+            episode_done = np.ones(self.num_envs, dtype=bool)
             flight_ended = res.acting.copy()
-        elif ended.size:
-            obs, masks = env.reset(seeds=self._seeds(ended.size), episodes=ended)
-            episode_done[ended] = True
         else:
-            obs, masks = st.obs, st.action_mask
+            obs, masks, episode_done = st.obs, st.action_mask, st.restarted
         return TrainStep(
-            result=res,
+            # the step's report with the observations it ended with (before any restart)
+            result=replace(res, obs=st.final_obs, action_mask=st.final_action_mask),
             obs=obs,
             action_mask=masks,
             reward=st.reward - penalty,
@@ -270,9 +288,12 @@ class CurriculumEnv:
         return out
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to continue exactly (the VectorEnv itself is pickled)."""
+        """Everything needed to continue exactly (the VectorEnv itself is pickled, without its
+        auto-reset hooks, which point back here: :meth:`load_state_dict` attaches them)."""
+        env = copy.copy(self.env)
+        env.autoreset_when = env.autoreset_seeds = None
         return {
-            "env": self.env,
+            "env": env,
             "rng": self.rng.bit_generator.state,
             "stage": self.stage,
             "results": list(self.curriculum.results) if self.curriculum is not None else [],
@@ -283,7 +304,7 @@ class CurriculumEnv:
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.env = state["env"]
+        self.env = self._attach(state["env"])
         self.config, self.n_agents = self.env.config, self.env.n_agents
         self.observation_size = self.env.observation_size
         self.rng.bit_generator.state = state["rng"]

@@ -90,6 +90,62 @@ def test_vector_env_autoreset_keeps_the_final_observation_and_draws_new_seeds():
     pytest.fail("no episode ended")
 
 
+def test_autoreset_hooks_choose_the_episodes_that_end_and_their_seeds():
+    """``autoreset_when`` decides which episodes end with the step (it may end some itself),
+    ``autoreset_seeds`` gives the seeds of the restarted ones; what they ended with stays in
+    the step's ``final_*`` arrays, the slots in ``restarted``."""
+    asked: list[int] = []
+
+    def seeds(n: int) -> list[int]:
+        asked.append(n)
+        return [1000 + len(asked)] * n
+
+    def every_tenth_step(res) -> np.ndarray:
+        due = np.flatnonzero(vec.episode_steps >= 10)
+        if due.size:
+            vec.end_episodes(due)
+        return ~vec.flying.any(axis=1)
+
+    vec = VectorEnv(
+        "low", 4, autoreset=True, seed=2, autoreset_seeds=seeds, autoreset_when=every_tenth_step
+    )
+    vec.reset()
+    started = vec.episode_seeds.copy()
+    for step in range(1, 21):
+        out = vec.step(np.full((4, 1), HOLD))
+        assert np.array_equal(out.restarted, np.full(4, step % 10 == 0))
+        if step == 10:
+            assert np.array_equal(out.final_episode_seeds, started)
+            assert (out.final_obs[:, 0, 11] > 0).all() and (out.obs[:, 0, 11] == 0).all()
+            assert out.final_action_mask.shape == out.action_mask.shape == (4, 1, 27)
+            assert (out.result.outcome[:, 0] == 0).all()  # cut, not finished by the simulator
+    assert asked == [4, 4] and (vec.episode_seeds == 1002).all()
+    plain = VectorEnv("low", 4, seed=2)
+    plain.reset()
+    assert not plain.step(np.full((4, 1), HOLD)).restarted.any()
+
+
+@pytest.mark.parametrize(
+    "kwargs, when, expect",
+    [
+        (dict(autoreset_seeds=3), None, "autoreset_seeds must be None or a callable"),
+        (dict(autoreset_when="x"), None, "autoreset_when must be None or a callable"),
+        (dict(autoreset_seeds=lambda n: [-1] * n), "all", "autoreset_seeds(n)[0] = -1"),
+        (dict(autoreset_seeds=lambda n: [1]), "all", "autoreset_seeds(n) expects 3 seed(s)"),
+        ({}, "ints", "autoreset_when must return a (3,) bool array"),
+    ],
+)
+def test_bad_autoreset_hooks_raise_argument_errors(kwargs, when, expect):
+    from cdr_bench.errors import ArgumentError
+
+    rules = {"all": lambda res: np.ones(3, bool), "ints": lambda res: np.ones(3, int)}
+    with pytest.raises(ArgumentError) as err:
+        vec = VectorEnv("low", 3, autoreset=True, **{"autoreset_when": rules.get(when), **kwargs})
+        vec.reset(seed=0)
+        vec.step(np.full((3, 1), HOLD))
+    assert expect in str(err.value)
+
+
 def test_cleanrl_style_masked_ppo_update_runs_on_the_native_vector_env():
     torch = pytest.importorskip("torch")
     envs = gymnasium.make_vec(
