@@ -16,8 +16,6 @@ from __future__ import annotations
 import html
 import json
 import re
-import shutil
-import subprocess
 import time
 from html.parser import HTMLParser
 from pathlib import Path
@@ -31,6 +29,7 @@ from cdr_bench.leaderboard.render import render_html, render_markdown
 from cdr_bench.leaderboard.submission import SubmissionError, load_submission, load_submissions
 from cdr_bench.leaderboard.text import md_text, skeleton
 from tests.leaderboard.conftest import ROOT, cdr, make_repo, submission_yaml
+from tests.leaderboard.test_html_browser import CHROMIUM, chromium
 
 LB = ROOT / "leaderboard"
 PWN = "document.body.setAttribute('data-pwned','{}')"
@@ -360,10 +359,6 @@ def test_docs_site_markdown_renders_the_text_literally(name: str) -> None:
 # ----------------------------------------------------------------------------------------------
 # Headless Chromium: nothing runs
 
-CHROMIUM = next(
-    (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
-    None,
-)
 needs_chromium = pytest.mark.skipif(
     CHROMIUM is None,
     reason="headless Chromium not installed (apt-get install -y chromium)",
@@ -371,25 +366,8 @@ needs_chromium = pytest.mark.skipif(
 
 
 def dom(page: Path) -> str:
-    assert CHROMIUM is not None
-    r = subprocess.run(
-        [
-            CHROMIUM,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-dev-shm-usage",
-            f"--user-data-dir={page.parent / '.chromium-profile'}",
-            "--virtual-time-budget=3000",
-            "--dump-dom",
-            page.as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 0, r.stderr[-2000:]
-    return r.stdout
+    """The page's DOM after its scripts ran (the browser tests' headless Chromium)."""
+    return chromium(page, "", "--dump-dom")
 
 
 def body_attrs(text: str) -> dict[str, str | None]:
