@@ -372,119 +372,37 @@ _DENIED_SYSCALLS = (
 ).split()
 """System calls a confined agent never needs; refused with ``EPERM`` (module docstring)."""
 
-# system call numbers (from the kernel's unistd headers) and AUDIT_ARCH values
+# System call numbers from the kernel's unistd headers: "name x86_64 aarch64" ("-": none there).
+_SYSCALL_TABLE = (
+    (
+        "unshare 272 97 / setns 308 268 / mount 165 40 / "
+        "umount2 166 39 / pivot_root 155 41 / chroot 161 51 / "
+        "open_tree 428 428 / move_mount 429 429 / fsopen 430 430 / "
+        "fsconfig 431 431 / fsmount 432 432 / fspick 433 433 / "
+        "mount_setattr 442 442 / ptrace 101 117 / process_vm_readv 310 270 / "
+        "process_vm_writev 311 271 / kcmp 312 272 / pidfd_getfd 438 438 / "
+        "init_module 175 105 / finit_module 313 273 / delete_module 176 106 / "
+        "kexec_load 246 104 / kexec_file_load 320 294 / reboot 169 142 / "
+        "swapon 167 224 / swapoff 168 225 / acct 163 89 / "
+        "quotactl 179 60 / syslog 103 116 / settimeofday 164 170 / "
+        "clock_settime 227 112 / adjtimex 159 171 / clock_adjtime 305 266 / "
+        "iopl 172 - / ioperm 173 - / keyctl 250 219 / "
+        "add_key 248 217 / request_key 249 218 / bpf 321 280 / "
+        "perf_event_open 298 241 / userfaultfd 323 282 / io_uring_setup 425 425 / "
+        "io_uring_enter 426 426 / io_uring_register 427 427 / open_by_handle_at 304 265 / "
+        "name_to_handle_at 303 264 / lookup_dcookie 212 18 / vhangup 153 58 / "
+        "clone 56 220 / clone3 435 435 / socket 41 198 / "
+    )
+    .strip(" /")
+    .split(" / ")
+)
+_ARCHES = {"x86_64": (0xC000003E, 1), "aarch64": (0xC00000B7, 2)}
+"""``platform.machine()`` -> (its AUDIT_ARCH value, its column in :data:`_SYSCALL_TABLE`)."""
 _SYSCALLS: dict[str, tuple[int, dict[str, int]]] = {
-    "x86_64": (
-        0xC000003E,
-        {
-            "unshare": 272,
-            "setns": 308,
-            "mount": 165,
-            "umount2": 166,
-            "pivot_root": 155,
-            "chroot": 161,
-            "open_tree": 428,
-            "move_mount": 429,
-            "fsopen": 430,
-            "fsconfig": 431,
-            "fsmount": 432,
-            "fspick": 433,
-            "mount_setattr": 442,
-            "ptrace": 101,
-            "process_vm_readv": 310,
-            "process_vm_writev": 311,
-            "kcmp": 312,
-            "pidfd_getfd": 438,
-            "init_module": 175,
-            "finit_module": 313,
-            "delete_module": 176,
-            "kexec_load": 246,
-            "kexec_file_load": 320,
-            "reboot": 169,
-            "swapon": 167,
-            "swapoff": 168,
-            "acct": 163,
-            "quotactl": 179,
-            "syslog": 103,
-            "settimeofday": 164,
-            "clock_settime": 227,
-            "adjtimex": 159,
-            "clock_adjtime": 305,
-            "iopl": 172,
-            "ioperm": 173,
-            "keyctl": 250,
-            "add_key": 248,
-            "request_key": 249,
-            "bpf": 321,
-            "perf_event_open": 298,
-            "userfaultfd": 323,
-            "io_uring_setup": 425,
-            "io_uring_enter": 426,
-            "io_uring_register": 427,
-            "open_by_handle_at": 304,
-            "name_to_handle_at": 303,
-            "lookup_dcookie": 212,
-            "vhangup": 153,
-            "clone": 56,
-            "clone3": 435,
-            "socket": 41,
-        },
-    ),  # fmt: skip
-    "aarch64": (
-        0xC00000B7,
-        {
-            "unshare": 97,
-            "setns": 268,
-            "mount": 40,
-            "umount2": 39,
-            "pivot_root": 41,
-            "chroot": 51,
-            "open_tree": 428,
-            "move_mount": 429,
-            "fsopen": 430,
-            "fsconfig": 431,
-            "fsmount": 432,
-            "fspick": 433,
-            "mount_setattr": 442,
-            "ptrace": 117,
-            "process_vm_readv": 270,
-            "process_vm_writev": 271,
-            "kcmp": 272,
-            "pidfd_getfd": 438,
-            "init_module": 105,
-            "finit_module": 273,
-            "delete_module": 106,
-            "kexec_load": 104,
-            "kexec_file_load": 294,
-            "reboot": 142,
-            "swapon": 224,
-            "swapoff": 225,
-            "acct": 89,
-            "quotactl": 60,
-            "syslog": 116,
-            "settimeofday": 170,
-            "clock_settime": 112,
-            "adjtimex": 171,
-            "clock_adjtime": 266,
-            "keyctl": 219,
-            "add_key": 217,
-            "request_key": 218,
-            "bpf": 280,
-            "perf_event_open": 241,
-            "userfaultfd": 282,
-            "io_uring_setup": 425,
-            "io_uring_enter": 426,
-            "io_uring_register": 427,
-            "open_by_handle_at": 265,
-            "name_to_handle_at": 264,
-            "lookup_dcookie": 18,
-            "vhangup": 58,
-            "clone": 220,
-            "clone3": 435,
-            "socket": 198,
-        },
-    ),  # fmt: skip
+    machine: (arch, {f[0]: int(f[col]) for f in map(str.split, _SYSCALL_TABLE) if f[col] != "-"})
+    for machine, (arch, col) in _ARCHES.items()
 }
+"""Per machine: its AUDIT_ARCH value and the numbers of the system calls the filter names."""
 _CLONE_NAMESPACES = 0x7E020080
 """CLONE_NEWNS | NEWCGROUP | NEWUTS | NEWIPC | NEWUSER | NEWPID | NEWNET | NEWTIME."""
 _AF_NETLINK, _AF_PACKET, _SOCK_RAW = 16, 17, 3
