@@ -35,11 +35,12 @@ for part in "${parts[@]}"; do
             "$py" -m cdr_bench latency $ag --out $ag/analysis/latency.json
             st=$ag/analysis/sample-target
             ck=sweeps/landed/dac-sample/ab0ea5d749fdcfa2/checkpoint.pt  # its one trial
+            # on the leaderboard's test episodes, as the entry it is compared with
             CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench evaluate $ag --no-progress --force \
-                --out $st/result.json
+                --split test --out $st/result.json
             for sc in head-on crossing overtaking; do
                 CDR_BENCH_CHECKPOINT=$ck "$py" -m cdr_bench multimodal $ag --search \
-                    --scenario tactical/$sc --out $st/multimodal-tactical_$sc.json
+                    --seed 20261127 --scenario tactical/$sc --out $st/multimodal-tactical_$sc.json
             done
             "$py" -m cdr_bench leaderboard render-docs ;;
         *) echo "unknown part: $part (expected main, ablations or analysis)" >&2; exit 2 ;;

@@ -62,32 +62,31 @@ def test_a_missing_analysis_file_is_an_error_naming_it(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="sample-target/result.json: no such result file"):
         r.analysis(folder, "x", tables.TACTICAL)
     src = ROOT / folder
-    for name in ("result.json", "result.jsonl.gz"):  # the per-episode file kept compressed
+    for name in ("result.json", "result.jsonl.xz"):  # the per-episode file kept compressed
         shutil.copy(src / name, repo / folder / name)
     with pytest.raises(UserError, match="multimodal-tactical_head-on.json: cannot read"):
         r.analysis(folder, "x", tables.TACTICAL)
 
 
 def test_the_per_episode_file_is_read_compressed_or_plain_and_checked(tmp_path: Path) -> None:
-    """The analysis run keeps its per-episode file as ``result.jsonl.gz``: read as the plain
-    file would be, and still checked against the SHA-256 its ``result.json`` recorded (an
-    error names the file in the repository, not the temporary copy)."""
-    from cdr_bench.jsonl import gzip_bytes, read_bytes
+    """The analysis run keeps its per-episode file as ``result.jsonl.xz``: read, and checked
+    against the SHA-256 its ``result.json`` recorded (an error names the file in the
+    repository, not the temporary copy)."""
+    from cdr_bench.evaluate.results import compress_log
+    from cdr_bench.jsonl import read_bytes
 
     folder = "agents/diffusion_ac/analysis/sample-target"
     src = ROOT / folder
-    plain, packed = tmp_path / "plain" / folder, tmp_path / "packed" / folder
-    for d in (plain, packed):
-        d.mkdir(parents=True)
-        shutil.copytree(LB, d.parents[3] / "leaderboard")
-        shutil.copy(src / "result.json", d / "result.json")
-    (plain / "result.jsonl").write_bytes(read_bytes(src / "result.jsonl.gz"))
-    shutil.copy(src / "result.jsonl.gz", packed / "result.jsonl.gz")
-    a, _ = tables.Repo(tmp_path / "plain" / "leaderboard").analysis(folder, "x", ())
-    b, _ = tables.Repo(tmp_path / "packed" / "leaderboard").analysis(folder, "x", ())
-    assert a == b
-    edited = read_bytes(src / "result.jsonl.gz").replace(b'"success"', b'"timeout"', 1)
-    (packed / "result.jsonl.gz").write_bytes(gzip_bytes(edited))
+    packed = tmp_path / "packed" / folder
+    packed.mkdir(parents=True)
+    shutil.copytree(LB, tmp_path / "packed" / "leaderboard")
+    shutil.copy(src / "result.json", packed / "result.json")
+    shutil.copy(src / "result.jsonl.xz", packed / "result.jsonl.xz")
+    got, _ = tables.Repo(tmp_path / "packed" / "leaderboard").analysis(folder, "x", ())
+    n = sum(s["episodes"] for s in got["scenarios"])
+    assert n == len(read_bytes(src / "result.jsonl.xz").splitlines()) == 6000
+    edited = read_bytes(src / "result.jsonl.xz").replace(b'"success"', b'"timeout"', 1)
+    (packed / "result.jsonl.xz").write_bytes(compress_log(edited.decode()))
     with pytest.raises(UserError, match="does not match it") as e:
         tables.Repo(tmp_path / "packed" / "leaderboard").analysis(folder, "y", ())
     assert str(packed) in str(e.value) and "cdr-bench-result-" not in str(e.value)
