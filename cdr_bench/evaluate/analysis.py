@@ -54,7 +54,7 @@ def register(sub: Any) -> None:
         "--seed",
         type=ranged(int, 0, MAX_SEED),
         default=0,
-        help="base seed of the episodes (as evaluate)",
+        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
     )
     mm.add_argument(
         "--search",
