@@ -112,8 +112,20 @@ def _sum_k(x: Array) -> Array:
     return out
 
 
-def mvp_actions(observations: NDArray, masks: NDArray) -> NDArray[np.int64]:
-    """(N,) actions of ``mvp`` for (N, F) observations and (N, 27) action masks."""
+def mvp_actions(
+    observations: NDArray, masks: NDArray, reciprocal: bool = False
+) -> NDArray[np.int64]:
+    """(N,) actions of ``mvp`` for (N, F) observations and (N, 27) action masks.
+
+    ``reciprocal``: the cooperative variant ``mvp-reciprocal`` for sectors in which every
+    aircraft runs it (each resolving on its own observation, no messages), in the spirit of
+    reciprocal velocity obstacles (ORCA): each aircraft of a conflict takes half of the
+    resolution, counting on the other to take the other half - the wanted velocity change is
+    half of MVP's - and the vertical escape is shared by direction instead of being taken by
+    both: an aircraft heading east (north-east through south-east, ``sin(heading) >= 0``) may
+    only climb, one heading west only descend, so the two aircraft of a head-on or crossing
+    conflict never escape to the same level. Without ``reciprocal`` the actions are exactly
+    ``mvp``'s."""
     obs = np.asarray(observations, dtype=np.float64)
     masks = np.asarray(masks)
     n = obs.shape[0]
@@ -150,6 +162,9 @@ def mvp_actions(observations: NDArray, masks: NDArray) -> NDArray[np.int64]:
     # the freer level: larger distance to its closest observed aircraft
     up_gap = np.where(present & (dlev == 1), dl, np.inf).min(1)
     down_gap = np.where(present & (dlev == -1), dl, np.inf).min(1)
+    if reciprocal:
+        east = hs >= 0
+        up_free, down_free = up_free & east, down_free & ~east
     a_h = np.where(
         up_free & down_free,
         np.where(up_gap >= down_gap, 1, -1),
@@ -171,6 +186,8 @@ def mvp_actions(observations: NDArray, masks: NDArray) -> NDArray[np.int64]:
     ux = np.where(far, cx / dcpa, -px / perp)
     uy = np.where(far, cy / dcpa, -py / perp)
     scale = np.maximum(PZ_KM - d, 0.0) / np.maximum(t, DT_S)
+    if reciprocal:
+        scale = 0.5 * scale  # each of the two takes half
     dvx = _sum_k(np.where(conflict, -ux * scale, 0.0))
     dvy = _sum_k(np.where(conflict, -uy * scale, 0.0))
     want_x, want_y = v_own_x + dvx, v_own_y + dvy

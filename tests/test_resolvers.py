@@ -117,3 +117,37 @@ def test_one_hot_input_is_appended_after_the_observation():
     np.testing.assert_array_equal(x[:, :F], o)
     assert x[0, F:].sum() == 1.0 and x[0, F + _index(-1, 0, 0)] == 1.0
     np.testing.assert_array_equal(mvp_onehot(o, ALL), x[:, F:])
+
+
+def test_reciprocal_mvp_shares_the_vertical_escape_by_direction():
+    """Two aircraft in a head-on conflict, both levels free: plain MVP climbs both (to the same
+    level); reciprocal MVP climbs the eastbound one and descends the westbound one."""
+    east = _obs(heading_deg=90.0, neighbours=[(40.0, 0.0, -860.0, 0.0, 0)])
+    west = _obs(heading_deg=270.0, neighbours=[(-40.0, 0.0, 860.0, 0.0, 0)])
+    assert mvp_actions(east, ALL)[0] == mvp_actions(west, ALL)[0] == _index(0, 0, 1)
+    assert mvp_actions(east, ALL, reciprocal=True)[0] == _index(0, 0, 1)
+    assert mvp_actions(west, ALL, reciprocal=True)[0] == _index(0, 0, -1)
+    # no descent for the westbound one (lowest level): it resolves horizontally, never climbs
+    low = ALL.copy()
+    low[0, [_index(p, v, -1) for p in (-1, 0, 1) for v in (-1, 0, 1)]] = 0
+    a = int(mvp_actions(west, low, reciprocal=True)[0])
+    assert a % 3 - 1 == 0 and a // 9 - 1 != 0
+
+
+def test_reciprocal_mvp_asks_for_half_the_velocity_change():
+    """A crossing conflict with no level change allowed: the reciprocal variant's wanted
+    velocity change is half of MVP's, so it picks a gentler (or the same) discrete change and
+    never one MVP would not turn toward."""
+    rng = np.random.default_rng(5)
+    level = ALL.copy()
+    level[0, [_index(p, v, h) for p in (-1, 0, 1) for v in (-1, 0, 1) for h in (-1, 1)]] = 0
+    differ = 0
+    for _ in range(300):
+        dx, dy = rng.uniform(-40, 40, 2)
+        dvx, dvy = rng.uniform(-800, 800, 2)
+        o = _obs(heading_deg=float(rng.uniform(0, 360)), neighbours=[(dx, dy, dvx, dvy, 0)])
+        a, b = int(mvp_actions(o, level)[0]), int(mvp_actions(o, level, reciprocal=True)[0])
+        psi_a, psi_b = a // 9 - 1, b // 9 - 1
+        assert psi_b in (psi_a, 0) or psi_a == 0
+        differ += a != b
+    assert differ > 0

@@ -75,7 +75,6 @@ from cdr_bench.evaluate.sandbox import (
 from cdr_bench.evaluate.seeds import TEST_SEED
 from cdr_bench.leaderboard.data import (
     DEFAULT_REFERENCE,
-    HEADLINE_SCENARIO,
     build_data,
     current_identity,
     load_entries,
@@ -85,8 +84,14 @@ from cdr_bench.leaderboard.data import (
     replays_path,
     result_path,
 )
+from cdr_bench.leaderboard.multi_agent import track_data
 from cdr_bench.leaderboard.published import load_published
-from cdr_bench.leaderboard.submission import Submission, load_submissions
+from cdr_bench.leaderboard.submission import (
+    TRACK_EPISODES,
+    TRACKS,
+    Submission,
+    load_submissions,
+)
 from cdr_bench.leaderboard.verify import (
     FRESH_ALPHA,
     FRESH_EPISODES,
@@ -96,7 +101,7 @@ from cdr_bench.leaderboard.verify import (
     fresh_verdict,
 )
 
-PAPER_EPISODES = 1000
+PAPER_EPISODES = TRACK_EPISODES["single-agent"]
 BASE_SEED = TEST_SEED
 """The leaderboard's test episodes (:data:`cdr_bench.evaluate.seeds.SPLITS`)."""
 REPLAY_EPISODES = 3
@@ -158,7 +163,9 @@ def render_all(
     published = load_published(lb_dir)
     subs = load_submissions(lb_dir, published.names)
     entries = load_entries(subs, results_dir)
-    data = build_data(entries, published, reference, load_study(lb_dir))
+    single = [e for e in entries if e.sub.track == "single-agent"]
+    data = build_data(single, published, reference, load_study(lb_dir))
+    data["multi_agent"] = track_data([e for e in entries if e.sub.track == "multi-agent"])
     if reuse_plots:
         plots = render_plots(data, reuse=lb_dir / "plots", drawn=drawn)
     else:
@@ -376,8 +383,13 @@ def evaluate_submission(
     return wall
 
 
-def committed_episodes(results_dir: Path, subs: list[Submission]) -> int:
-    """The episode count per scenario of the committed results (one number for all)."""
+def committed_episodes(results_dir: Path, subs: list[Submission]) -> dict[str, int]:
+    """The episode count per scenario of the committed results of each track (one number for
+    all the entries of a track; the track's full count where none is committed)."""
+    return {t: _committed(results_dir, [s for s in subs if s.track == t], t) for t in TRACKS}
+
+
+def _committed(results_dir: Path, subs: list[Submission], track: str) -> int:
     counts = set()
     for s in subs:
         p = result_path(results_dir, s.name)
@@ -387,8 +399,10 @@ def committed_episodes(results_dir: Path, subs: list[Submission]) -> int:
             except ValueError:
                 continue
     if len(counts) > 1:
-        raise UserError(f"{results_dir}: results with different episode counts {sorted(counts)}")
-    return counts.pop() if counts else PAPER_EPISODES
+        raise UserError(
+            f"{results_dir}: {track} results with different episode counts {sorted(counts)}"
+        )
+    return counts.pop() if counts else TRACK_EPISODES[track]
 
 
 def untracked_agent_files(sub: Submission, root: Path) -> list[str]:
@@ -422,7 +436,7 @@ def _evaluate_all(
     root: Path,
     out_dir: Path,
     scratch: Path,
-    n: int,
+    n: dict[str, int],
     side_by_side: bool = False,
     reruns: dict[str, dict[str, Any]] | None = None,
 ) -> None:
@@ -448,7 +462,13 @@ def _evaluate_all(
         else f"{opts.workers} worker(s)"
     )
     what = "re-running" if reruns is not None else "evaluating"
-    per = "sampled batches" if reruns is not None else f"{n} episodes per scenario"
+    per = (
+        "sampled batches"
+        if reruns is not None
+        else " and ".join(
+            f"{n[t]} episodes per scenario ({t})" for t in TRACKS if any(s.track == t for s in subs)
+        )
+    )
     log(
         f"{what} {len(subs)} submission(s), {per}, {how}; limits: "
         f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per agent process, "
@@ -459,10 +479,10 @@ def _evaluate_all(
     def one(sub: Submission) -> None:
         rr = None if reruns is None else reruns[sub.name]
         wall = evaluate_submission(
-            sub, root, out_dir, scratch / sub.name, n, per_sub, opts.limits, rerun=rr
+            sub, root, out_dir, scratch / sub.name, n[sub.track], per_sub, opts.limits, rerun=rr
         )
         if rr is None:
-            eps = n * len(sub.scenarios)
+            eps = n[sub.track] * len(sub.scenarios)
             log(f"  {sub.name}: {eps} episodes in {wall:.1f} s ({eps / max(wall, 1e-9):.0f} ep/s)")
         else:
             log(f"  {sub.name}: agent re-run in {wall:.1f} s")
@@ -628,8 +648,14 @@ def run(opts: Options) -> int:
         new_results = None
         source = results_dir
         if opts.evaluate is not None:
-            n = opts.episodes or (
-                PAPER_EPISODES if opts.evaluate == [] else committed_episodes(results_dir, subs)
+            n = (
+                dict.fromkeys(TRACKS, opts.episodes)
+                if opts.episodes
+                else (
+                    dict(TRACK_EPISODES)
+                    if opts.evaluate == []
+                    else committed_episodes(results_dir, subs)
+                )
             )
             new_results = stage / "results"
             _copy_results(results_dir, new_results, [s for s in subs if s not in chosen])
@@ -665,21 +691,27 @@ def sampled_seeds(subs: list[Submission], rng: random.Random) -> list[Submission
     return out
 
 
-def rerun_sample(grid: list[tuple[str, int]], k: int, rng: random.Random) -> list[Any]:
+def rerun_sample(
+    grid: list[tuple[str, int]], k: int, rng: random.Random, headline: str = "high"
+) -> list[Any]:
     """``k`` batches of ``grid`` (``(scenario, batch)``) drawn at random: the first among the
-    headline scenario's batches (what ranks an entry) where it has any, the rest among all."""
-    head = [g for g in grid if g[0] == HEADLINE_SCENARIO] or grid
+    ``headline`` scenario's batches (what ranks an entry in its track) where it has any, the
+    rest among all."""
+    head = [g for g in grid if g[0] == headline] or grid
     first = rng.choice(head)
     rest = [g for g in grid if g != first]
     return sorted([first, *rng.sample(rest, min(k - 1, len(rest)))])
 
 
 def replay_all(
-    views: list[Submission], results_dir: Path, first: int | None, workers: int
+    views: list[Submission],
+    results_dir: Path,
+    first: dict[str, int | None],
+    workers: int,
 ) -> tuple[int, list[str]]:
     """Replay every committed episode of these runs (:func:`.verify.replay_result`, the first
-    ``first`` of each scenario when given), ``workers`` result files at a time. Returns the
-    number of episodes replayed and the differences (readable; empty: all identical)."""
+    ``first[track]`` of each scenario when given), ``workers`` result files at a time. Returns
+    the number of episodes replayed and the differences (readable; empty: all identical)."""
     from concurrent.futures import ProcessPoolExecutor
 
     from cdr_bench.leaderboard.verify import replay_result
@@ -688,16 +720,17 @@ def replay_all(
     missing = [
         f"results/{p.name}: missing from the committed leaderboard" for p in paths if not p.exists()
     ]
+    firsts = [first[v.track] for v, p in zip(views, paths, strict=True) if p.exists()]
     paths = [p for p in paths if p.exists()]
     total, diffs = 0, list(missing)
     if workers <= 1 or len(paths) <= 1:
-        outcomes = [replay_result(p, first) for p in paths]
+        outcomes = [replay_result(p, f) for p, f in zip(paths, firsts, strict=True)]
     else:
         import multiprocessing
 
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(min(workers, len(paths)), mp_context=ctx) as ex:
-            outcomes = list(ex.map(replay_result, paths, [first] * len(paths)))
+            outcomes = list(ex.map(replay_result, paths, firsts))
     for p, (n, d) in zip(paths, outcomes, strict=True):
         total += n
         if d:
@@ -749,20 +782,24 @@ def _check(
 ) -> int:
     t0 = time.perf_counter()
     committed_n = committed_episodes(results_dir, subs)
-    n = opts.episodes or committed_n
-    if n > committed_n:
-        raise UserError(f"--episodes {n}: the committed results have only {committed_n}")
-    if n != committed_n and n % DEFAULT_BATCH_SIZE:
+    tracks = [t for t in TRACKS if any(s.track == t for s in subs)]
+    most = max(committed_n[t] for t in tracks)
+    if opts.episodes is not None and opts.episodes > most:
+        raise UserError(f"--episodes {opts.episodes}: the committed results have only {most}")
+    # a partial check (--episodes) takes the first episodes of every track that has more
+    n = {t: min(opts.episodes or committed_n[t], committed_n[t]) for t in TRACKS}
+    partial = {t for t in tracks if n[t] != committed_n[t]}
+    if partial and opts.episodes and opts.episodes % DEFAULT_BATCH_SIZE:
         raise UserError(
-            f"--episodes {n}: a partial check runs whole batches; use a multiple of "
-            f"{DEFAULT_BATCH_SIZE} (or {committed_n}, the committed count)"
+            f"--episodes {opts.episodes}: a partial check runs whole batches; use a multiple of "
+            f"{DEFAULT_BATCH_SIZE} (or {most}, the committed count)"
         )
     diffs: list[str] = []
     notes: list[str] = []
     views = with_seeds(chosen)
     diffs += identity_diffs(views, root, results_dir)
     replayed, replay_diffs = replay_all(
-        views, results_dir, None if n == committed_n else n, opts.workers
+        views, results_dir, {t: n[t] if t in partial else None for t in TRACKS}, opts.workers
     )
     diffs += replay_diffs
     log(
@@ -785,17 +822,18 @@ def _check(
             except ValueError:
                 continue
             grid = list(batches_of(result))
-            if n != committed_n:
-                grid = [(sc, k) for sc, k in grid if k * DEFAULT_BATCH_SIZE < n]
+            if sub.track in partial:
+                grid = [(sc, k) for sc, k in grid if k * DEFAULT_BATCH_SIZE < n[sub.track]]
+            headline = sub.headline_scenario
             reruns[sub.name] = {
                 "result": str(committed.resolve()),
-                "batches": rerun_sample(grid, opts.rerun_batches, rng),
+                "batches": rerun_sample(grid, opts.rerun_batches, rng, headline),
                 "out": str((scratch / sub.name / "agreement.json").resolve()),
                 "fresh": None,
             }
-            if opts.fresh_episodes and any(s[0] == HEADLINE_SCENARIO for s in grid):
+            if opts.fresh_episodes and any(s[0] == headline for s in grid):
                 reruns[sub.name]["fresh"] = {
-                    "scenario": HEADLINE_SCENARIO,
+                    "scenario": headline,
                     "episodes": opts.fresh_episodes,
                     # unpredictable, and printed so that a failure can be looked into
                     "base_seed": secrets.randbits(62),
@@ -807,7 +845,8 @@ def _check(
             f"{opts.rerun_batches} batch(es) of {DEFAULT_BATCH_SIZE} episodes per run, "
             f"tolerance {100 * MIN_AGREEMENT:g} % identical decisions; "
             + (
-                f"{opts.fresh_episodes} fresh {HEADLINE_SCENARIO} episodes per entry from seeds "
+                f"{opts.fresh_episodes} fresh episodes of each track's headline scenario per "
+                "entry from seeds "
                 f"drawn now, Fisher exact test at p < {FRESH_ALPHA:g}"
                 if opts.fresh_episodes
                 else "no fresh-episode test (--fresh-episodes 0)"
@@ -828,7 +867,7 @@ def _check(
                 diffs.append(f"results/{sub.name}.json: {text}")
             if got.get("fresh") is not None:
                 scored = read_result(result_path(results_dir, sub.name))
-                sc = next(s for s in scored["scenarios"] if s["id"] == HEADLINE_SCENARIO)
+                sc = next(s for s in scored["scenarios"] if s["id"] == sub.headline_scenario)
                 text, ok = fresh_verdict(sub.name, sc["metrics"]["ownship"], got["fresh"])
                 log(text)
                 if not ok:
@@ -869,7 +908,9 @@ def _check(
             diffs += compare_pages(lb_dir, files, notes)
     for note in notes:
         log(f"note: {note}")
-    scope = "" if n == committed_n else f" (first {n} of {committed_n} episodes per scenario)"
+    scope = "".join(
+        f" (first {n[t]} of {committed_n[t]} episodes per {t} scenario)" for t in sorted(partial)
+    )
     if diffs:
         print(
             f"leaderboard check FAILED{scope}: the committed leaderboard differs from what the "

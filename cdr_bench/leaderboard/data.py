@@ -61,7 +61,7 @@ from cdr_bench.leaderboard.submission import GROUPS, Submission
 from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
 
 DEFAULT_REFERENCE = "diffusion-ac"
-DATA_VERSION = 5
+DATA_VERSION = 6
 HEADLINE_SCENARIO = "high"
 HEADLINE_METRIC = "clean_success_rate"
 ALPHA = 0.05

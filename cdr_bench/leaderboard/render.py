@@ -350,6 +350,7 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
     if data["tactical"]:
         head, rows, _ = tactical_table(data)
         out += ["## Tactical scenarios", "", TACTICAL_NOTE, "", md_table(head, rows), ""]
+    out += _multi_agent_md(data)
     out += ["## Measured here, per scenario", "", INTRO.format(up=HIGHER, down=LOWER, ref=ref), ""]
     for t in data["tables"]:
         head, rows = scenario_table(data, t)
@@ -419,6 +420,58 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
         "",
     ]
     return "\n".join(out)
+
+
+def _multi_agent_md(data: dict[str, Any]) -> list[str]:
+    """The multi-agent track's section (nothing without an entry in it)."""
+    from cdr_bench.leaderboard import multi_agent as ma
+
+    track = data.get("multi_agent")
+    if not track:
+        return []
+    head, rows, _ = ma.ranking_table(track)
+    out = ["## Multi-agent track: every aircraft controlled", ""]
+    for para in ma.conclusion(track, ma._names(track)):
+        out += [para, ""]
+    out += [
+        f"### Ranking: clean flights on {track['scenario']}",
+        "",
+        md_table(head, rows, numeric_from=3),
+        "",
+        ma.note(track),
+        "",
+    ]
+    for t in track["tables"]:
+        head, rows = ma.scenario_table(track, t)
+        out += [f"### {t['scenario']} (system)", "", t["description"], "",
+                md_table(head, rows, numeric_from=2), ""]  # fmt: skip
+    return out
+
+
+def _multi_agent_html(data: dict[str, Any]) -> list[str]:
+    from cdr_bench.leaderboard import multi_agent as ma
+
+    track = data.get("multi_agent")
+    if not track:
+        return []
+    head, rows, groups = ma.ranking_table(track)
+    b = [
+        '<h2 id="multi-agent">Multi-agent track: every aircraft controlled</h2>',
+        '<div class="conclusion">',
+        *[f"<p>{inline_md(p)}</p>" for p in ma.conclusion(track, ma._names(track))],
+        "</div>",
+        f"<h3>Ranking: clean flights on {esc(track['scenario'])}</h3>",
+        html_table("table-multi-agent", head, rows, groups=groups),
+        f'<p class="note">{inline_md(ma.note(track))}</p>',
+    ]
+    for t in track["tables"]:
+        head, rows = ma.scenario_table(track, t)
+        b += [
+            f'<h3 id="ma-{_anchor(t["scenario"])}">{esc(t["scenario"])} (system)</h3>',
+            f'<p class="note">{esc(t["description"])}</p>',
+            html_table("table-ma-" + _anchor(t["scenario"]), head, rows),
+        ]
+    return b
 
 
 # ----------------------------------------------------------------------------------------------
@@ -701,7 +754,8 @@ def render_html(
         "<h1>cdr-bench leaderboard</h1>",
         '<nav><a href="#ranking">Ranking</a><a href="#seeds">Seeds</a><a href="#claims">Claims</a>'
         '<a href="#sensitivity">Sensitivity</a><a href="#tactical">Tactical</a>'
-        '<a href="#replays">Replays</a><a href="#measured">Per scenario</a>'
+        '<a href="#replays">Replays</a><a href="#multi-agent">Multi-agent track</a>'
+        '<a href="#measured">Per scenario</a>'
         '<a href="#plots">Plots</a><a href="#entries">Entries</a>'
         '<a href="#published">Published (paper)</a><a href="#side-by-side">Published vs '
         "measured</a></nav>",
@@ -750,6 +804,7 @@ def render_html(
             html_table("table-tactical", head, rows, groups=groups),
         ]
     b += _replay_html(data, replays or {})
+    b += _multi_agent_html(data)
     b += [
         '<h2 id="measured">Measured here, per scenario</h2>',
         f'<p class="note">{inline_md(INTRO.format(up=HIGHER, down=LOWER, ref=ref))}</p>',

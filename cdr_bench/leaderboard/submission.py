@@ -69,6 +69,18 @@ from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_pr
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
 GROUPS = ("scripted", "learned", "hybrid", "ablation")
+TRACKS = ("single-agent", "multi-agent")
+"""The leaderboard's two tracks. ``single-agent``: the agent flies the ownship of the paper's
+scenarios (ranked by the ownship's clean success on ``high``). ``multi-agent``: it flies every
+controlled aircraft of the scenarios whose traffic is controlled (ranked by the share of clean
+flights on ``marl/high-all``; docs/model.md §10.1.3)."""
+TRACK_HEADLINE = {"single-agent": "high", "multi-agent": "marl/high-all"}
+"""The scenario that ranks each track (its first re-run batch and fresh episodes in ``--check``
+are drawn from it)."""
+TRACK_EPISODES = {"single-agent": 1000, "multi-agent": 200}
+"""Episodes per scenario of a full evaluation in each track. The multi-agent track's episodes
+hold every controlled flight (37-49 at ``medium-all``/``high-all``), and the episode is the unit
+of its intervals: 200 episodes are ~9,800 flights at ``high-all``."""
 """Groups of measured entries, in display order (the paper's numbers are a fourth group,
 ``published``, never measured here)."""
 CHECKPOINT_SUFFIXES = (".pt", ".pth", ".safetensors", ".npz")
@@ -198,6 +210,14 @@ class Submission:
     """Scenarios whose first episodes are recorded as trajectories and replayed on the page."""
     seeds: tuple[Seed, ...] = ()
     """Every training seed (empty: one seed, ``checkpoint``); one has ``checkpoint``."""
+    track: str = "single-agent"
+    """One of :data:`TRACKS`: ``single-agent`` (the ownship) or ``multi-agent`` (every
+    controlled aircraft of scenarios whose traffic is controlled)."""
+
+    @property
+    def headline_scenario(self) -> str:
+        """The scenario that ranks this entry's track (:data:`TRACK_HEADLINE`)."""
+        return TRACK_HEADLINE[self.track]
 
     @property
     def seed(self) -> int | None:
@@ -310,7 +330,16 @@ FIELDS: dict[str, tuple[bool, str]] = {
     "authors": (True, "list of authors"),
     "reference": (True, "paper or code: an http(s) URL or a path in the repository"),
     "training": (True, "the command that trained the checkpoint; null for a scripted agent"),
-    "scenarios": (True, "'paper' (the paper suite) or a list of scenario registry names"),
+    "scenarios": (
+        True,
+        "'paper' (the paper suite), 'marl' (the multi-agent suite) or a list of scenario registry "
+        "names",
+    ),
+    "track": (
+        False,
+        "single-agent (default: the agent flies the ownship) or multi-agent (it flies every "
+        "controlled aircraft; scenarios whose traffic is controlled, e.g. the 'marl' suite)",
+    ),
     "published_as": (
         False,
         "row of the paper's Table 2 (agent) or Table 3 (variant) shown beside this entry, or a "
@@ -472,6 +501,11 @@ def load_submission(
     if len(set(replays)) != len(replays):
         raise SubmissionError(src, "replays", f"a scenario is listed twice: {list(replays)}")
 
+    track = _str(src, "track", data.get("track", "single-agent"))
+    if track not in TRACKS:
+        raise SubmissionError(src, "track", f"expected one of {', '.join(TRACKS)}, got {track!r}")
+    _track_scenarios(src, track, scenarios)
+
     seeds = _seeds(src, data.get("seeds"), root)
     if seeds:
         if training is None:
@@ -512,7 +546,37 @@ def load_submission(
         budget=budget,
         replays=replays,
         seeds=seeds,
+        track=track,
     )
+
+
+def _track_scenarios(src: Path, track: str, scenarios: tuple[str, ...]) -> None:
+    """A multi-agent entry is scored on scenarios with several controlled aircraft, its track's
+    headline scenario among them; a single-agent entry on scenarios with the ownship alone (the
+    ranking requires its headline scenario: :func:`.data.rank_entries`)."""
+    from cdr_bench.scenarios import load_scenario
+
+    headline = TRACK_HEADLINE[track]
+    for i, name in enumerate(scenarios):
+        c = load_scenario(name)
+        controlled = 1 + c.n_learning_intruders + c.traffic.controlled
+        if track == "multi-agent" and controlled < 2:
+            raise SubmissionError(
+                src,
+                f"scenarios[{i}]",
+                f"{name!r} has one controlled aircraft; a multi-agent entry is scored where the "
+                "traffic is controlled (the 'marl' suite)",
+            )
+        if track == "single-agent" and controlled > 1:
+            raise SubmissionError(
+                src,
+                f"scenarios[{i}]",
+                f"{name!r} has {controlled} controlled aircraft; declare `track: multi-agent`",
+            )
+    if track == "multi-agent" and headline not in scenarios:
+        raise SubmissionError(
+            src, "scenarios", f"the {track} track ranks on {headline!r}: it must be scored there"
+        )
 
 
 TEXT_FIELDS: dict[str, int] = {

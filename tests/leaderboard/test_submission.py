@@ -51,7 +51,8 @@ def test_repository_submissions_are_valid() -> None:
     names = {s.name for s in subs}
     assert {"direct", "random", "mvp", "diffusion-ac"} <= names
     for s in subs:
-        assert s.suite == "paper"
+        assert s.suite == {"single-agent": "paper", "multi-agent": "marl"}[s.track]
+    assert {s.name for s in subs if s.track == "multi-agent"} >= {"mvp-all", "mvp-reciprocal"}
 
 
 BAD = {
