@@ -34,6 +34,7 @@ from cdr_bench.evaluate.metrics import (
     BOOTSTRAP_RESAMPLES,
     BOOTSTRAP_SEED,
     METRICS,
+    ROLES,
     get_metric,
     role_of,
 )
@@ -138,6 +139,13 @@ def _ratio(nd: NDArray[np.float64], idx: NDArray[np.int64] | None = None) -> Any
         return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
 
 
+def _roles(episodes: list[dict[str, Any]]) -> list[str]:
+    """The roles flown in these episodes, in :data:`~cdr_bench.evaluate.metrics.ROLES` order
+    (the order of a result's ``metrics``)."""
+    seen = {role_of(ac["id"]) for ep in episodes for ac in ep["aircraft"]}
+    return [r for r in ROLES if r in seen]
+
+
 _LOADED: dict[tuple[str, int, int], tuple[dict[str, Any], list[dict[str, Any]]]] = {}
 
 
@@ -148,7 +156,7 @@ def _load(path: str | os.PathLike[str]) -> tuple[dict[str, Any], list[dict[str, 
     st = p.stat() if p.is_file() else None
     key = (str(p), st.st_mtime_ns if st else -1, st.st_size if st else -1)
     if key not in _LOADED:
-        result = read_result(path)
+        result = read_result(path, metrics=False)  # the comparison reads the episodes only
         _LOADED[key] = (result, read_episodes(path, result))
     return _LOADED[key]
 
@@ -213,8 +221,9 @@ def compare(
     rows = []
     for sid, (xa, xb) in pairs.items():
         idx = scenario_indices(sid, len(xa))
-        for role in sa[sid]["metrics"]:
-            if role not in sb[sid]["metrics"]:
+        roles_b = _roles(xb)
+        for role in _roles(xa):
+            if role not in roles_b:
                 continue
             na, nb = _sums(xa, role, names), _sums(xb, role, names)
             for name in names:
