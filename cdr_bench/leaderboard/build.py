@@ -104,7 +104,9 @@ from cdr_bench.leaderboard.verify import (
 PAPER_EPISODES = TRACK_EPISODES["single-agent"]
 BASE_SEED = TEST_SEED
 """The leaderboard's test episodes (:data:`cdr_bench.evaluate.seeds.SPLITS`)."""
-REPLAY_EPISODES = 3
+REPLAY_EPISODES = {"single-agent": 3, "multi-agent": 1}
+"""Recorded episodes per replayed scenario (a multi-agent episode holds every aircraft's
+trajectory: one is shown)."""
 """Episodes recorded per replayed scenario (the first ones of the evaluation)."""
 PAGES = ("README.md", "index.html", "leaderboard.json")
 _MPL_META = re.compile(r'<meta name="generator" content="[^"]*; plots: matplotlib ([^"]+)">')
@@ -165,7 +167,15 @@ def render_all(
     entries = load_entries(subs, results_dir)
     single = [e for e in entries if e.sub.track == "single-agent"]
     data = build_data(single, published, reference, load_study(lb_dir))
-    data["multi_agent"] = track_data([e for e in entries if e.sub.track == "multi-agent"])
+    multi = [e for e in entries if e.sub.track == "multi-agent"]
+    data["multi_agent"] = track_data(multi)
+    if data["multi_agent"] is not None:  # their replays beside the single-agent ones
+        rp = data["replays"]
+        order = [r["entry"] for r in data["multi_agent"]["ranking"]]
+        for e in sorted((e for e in multi if e.replays), key=lambda e: order.index(e.name)):
+            rp["entries"].append(e.name)
+            rp["files"][e.name] = f"results/{e.name}.replays.json"
+            rp["scenarios"] += [s for s in e.sub.replays if s not in rp["scenarios"]]
     if reuse_plots:
         plots = render_plots(data, reuse=lb_dir / "plots", drawn=drawn)
     else:
@@ -342,7 +352,7 @@ def evaluate_submission(
         "multimodal": {"episodes": DEFAULT_EPISODES, "samples": DEFAULT_SAMPLES},
         "replays": {
             "scenarios": list(sub.replays),
-            "episodes": REPLAY_EPISODES,
+            "episodes": REPLAY_EPISODES[sub.track],
             "out": str(replays),
         },
         "rerun": rerun,

@@ -168,6 +168,12 @@ def _names(data: dict[str, Any]) -> dict[str, str]:
     return {e["name"]: md_text(e["display_name"]) for e in data["entries"]}
 
 
+def _all_names(data: dict[str, Any]) -> dict[str, str]:
+    """:func:`_names` of the entries of both tracks."""
+    ma = (data.get("multi_agent") or {}).get("entries", [])
+    return _names(data) | {e["name"]: md_text(e["display_name"]) for e in ma}
+
+
 def _pct(m: dict[str, Any]) -> str:
     return fmt_metric("rate", m)
 
@@ -397,8 +403,9 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
             "## Replays",
             "",
             f"`index.html` replays the first {rp['episodes']} episodes of "
-            f"{', '.join(f'`{s}`' for s in rp['scenarios'])} side by side for "
-            f"{', '.join(_names(data)[n] for n in rp['entries'])}, drawn in the page from the "
+            f"{', '.join(f'`{s}`' for s in rp['scenarios'])} (one of a multi-agent scenario) "
+            f"side by side for {', '.join(_all_names(data)[n] for n in rp['entries'])}, drawn "
+            "in the page from the "
             "trajectories recorded by the scorer (`results/<entry>.replays.json`).",
             "",
         ]
@@ -684,13 +691,15 @@ def _replay_html(data: dict[str, Any], replays: dict[str, dict[str, Any]]) -> li
     rp = data["replays"]
     if not rp["entries"]:
         return []
-    names = _names(data)
-    group = {e["name"]: e["group"] for e in data["entries"]}
+    ma = (data.get("multi_agent") or {}).get("entries", [])
+    names = _all_names(data)
+    group = {e["name"]: e["group"] for e in [*data["entries"], *ma]}
     payload: dict[str, Any] = {"scenarios": {}}
     b = [
-        '<h2 id="replays">Replays: the same tactical episodes side by side</h2>',
-        '<p class="note">The first episodes of each replayed tactical scenario (the same seeds '
-        "as the evaluation), flown by each replayed entry, drawn from the trajectories the "
+        '<h2 id="replays">Replays: the same episodes side by side</h2>',
+        '<p class="note">The first episodes of each replayed scenario (the same seeds '
+        "as the evaluation; one episode of a multi-agent scenario, where every controlled "
+        "aircraft is a square), flown by each replayed entry, drawn from the trajectories the "
         "scorer recorded (<code>results/&lt;entry&gt;.replays.json</code>). Play, pause, or drag "
         "the slider; the panes move together. Each opens on its last step.</p>",
         '<p class="key">▲ ownship (solid trail) · ■ learning intruder (dashed trail) · ● '
