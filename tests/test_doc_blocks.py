@@ -351,9 +351,31 @@ def check_ppo_tutorial(out: str, cwd: Path) -> None:
     assert all(math.isfinite(u[k]) for u in updates for k in ("pg_loss", "v_loss", "entropy"))
     assert 0 < updates[0]["entropy"] <= math.log(27) + 1e-6  # a categorical over 27 actions
     assert summary["invalid_actions"] == 0  # the masked categorical never picks a masked action
-    assert 0.0 <= summary["eval_success_rate"] <= 1.0 and summary["eval_episodes"] == 16
-    state = torch.load(cwd / "runs" / "ppo-vector-env" / "policy.pt", weights_only=True)
+    policy = cwd / "runs" / "ppo-vector-env" / "policy.pt"
+    state = torch.load(policy, weights_only=True)
     assert state["actor.4.weight"].shape == (27, 64)
+    # scored by the evaluator: the trained state dict through agents/ppo_tutorial, on the same
+    # validation episodes as direct and mvp, and the paired differences of cdr-bench compare
+    from cdr_bench.evaluate.compare import compare
+    from cdr_bench.evaluate.loader import file_sha256
+    from cdr_bench.evaluate.results import read_result
+    from cdr_bench.evaluate.seeds import SPLITS
+
+    runs = {n: read_result(policy.parent / f"{n}.json") for n in ("ppo", "direct", "mvp")}
+    assert runs["ppo"]["agent"]["checkpoint_override"]["sha256"] == file_sha256(policy)
+    assert {r["agent"]["name"] for r in runs.values()} == {"ppo_tutorial", "direct", "mvp"}
+    assert {r["base_seed"] for r in runs.values()} == {SPLITS["validation"]}
+    assert summary["eval_split"] == "validation" and summary["eval_episodes"] == 16
+    clean = runs["ppo"]["scenarios"][0]["metrics"]["ownship"]["clean_success_rate"]
+    assert summary["clean_success"] == clean["value"] and 0.0 <= clean["value"] <= 1.0
+    for base in ("direct", "mvp"):
+        rows = compare(policy.parent / f"{base}.json", policy.parent / "ppo.json")["rows"]
+        (row,) = [
+            r for r in rows if r["metric"] == "clean_success_rate" and r["aircraft"] == "ownship"
+        ]
+        assert row["a"] == summary[f"{base}_clean_success"]
+        assert summary[f"minus_{base}"] == pytest.approx(row["diff"])
+        assert summary[f"minus_{base}_ci95"] == pytest.approx(row["ci95"])
 
 
 @_needs_modules("ray", "torch")

@@ -71,6 +71,9 @@ SPIN_S = 0.001
 """How long each side polls its pipe before it sleeps in ``select``: a decision or a step that
 takes less is picked up without the sleep and wake-up (0.1-0.4 ms per round trip here), at the
 cost of at most this much CPU per call."""
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""Thread counts of an agent's process unless the caller's environment sets them: one per
+process (torch, MKL and OpenBLAS read them at import), as the sandbox's child has."""
 
 
 def check_timeout(name: str, value: float) -> float:
@@ -117,7 +120,9 @@ class AgentProcess:
         # -P: no folder of the caller (the current folder, a json.py there) on the import path
         argv = [sys.executable, "-P", "-m", "cdr_bench.evaluate.agent_host", str(self.path)]
         self._scratch = make_scratch()
-        env: dict[str, str] = {**os.environ, "TMPDIR": str(self._scratch)}
+        # One thread per agent process (the evaluator runs one per worker), as in the sandbox;
+        # a thread count the caller sets in the environment wins.
+        env: dict[str, str] = {**ONE_THREAD, **os.environ, "TMPDIR": str(self._scratch)}
         stderr: Any = None  # plain evaluate: the agent's output goes to the terminal
         box: Confined | None = None
         nproc = None

@@ -58,7 +58,8 @@ class TrainArgs:
     max_wall_minutes: float = 0.0
     """stop (and finish normally) after this wall time; 0 = no limit"""
     threads: int = 1
-    """torch intra-op threads"""
+    """torch intra-op threads of the training process (1: one per process; the networks are small
+    and the simulator single-threaded, so more threads mostly contend)"""
     resume: bool = False
     """continue exactly from the state saved in run_dir"""
     n_envs: int = 32

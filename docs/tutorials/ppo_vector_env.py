@@ -1,17 +1,21 @@
 """Tutorial "PPO on the vector env": single-file PPO in the style of CleanRL's ``ppo.py``, on the
 native Gymnasium vector env of cdr-bench, with a masked categorical policy.
 
-    python docs/tutorials/ppo_vector_env.py                  # 400k steps of medium
+    python docs/tutorials/ppo_vector_env.py                  # the full run: 1.2M steps of high
     python docs/tutorials/ppo_vector_env.py --total-timesteps 2048 --num-envs 8 --num-steps 32
 
-Prints one JSON line per update, then the greedy policy's success rate on fresh episodes, and
-saves the policy's state dict (``--save``). Needs torch (the ``train`` extra).
+Prints one JSON line per update, saves the policy's state dict (``--save``), then scores the
+greedy policy with the package's evaluator (``cdr-bench evaluate`` of ``agents/ppo_tutorial``)
+on validation episodes, with Direct and MVP on the same episodes, and prints the paired
+differences in clean success (``cdr-bench compare``). Needs torch (the ``train`` extra).
+One torch thread (``--threads``): the networks are small, the simulator is single-threaded.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from collections import deque
 from pathlib import Path
@@ -23,25 +27,49 @@ from torch import nn
 from torch.distributions import Categorical
 
 import cdr_bench  # noqa: F401  (registers the cdr_bench/* Gymnasium ids)
+from cdr_bench.evaluate.api import evaluate, resolve_jobs
+from cdr_bench.evaluate.compare import compare, comparison_table
+from cdr_bench.evaluate.report import summary_text
+from cdr_bench.evaluate.results import read_result
+from cdr_bench.evaluate.seeds import SPLITS
+from cdr_bench.sim.core import REWARD_TERMS
+
+AGENT = Path(__file__).resolve().parents[2] / "agents" / "ppo_tutorial" / "agent.py"
+FAILURES = ("los", "nmac", "boundary")  # outcomes that end a flight before its goal
+IN_LOS = [REWARD_TERMS.index("los"), REWARD_TERMS.index("nmac")]  # columns of reward_terms
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--scenario", default="medium")
+    p.add_argument("--scenario", default="high", help="trained on, and scored on")
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--total-timesteps", type=int, default=400_000)
+    p.add_argument("--total-timesteps", type=int, default=1_200_000)
     p.add_argument("--num-envs", type=int, default=16, help="episodes stepped together")
     p.add_argument("--num-steps", type=int, default=128, help="steps per env per rollout")
-    p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--learning-rate", type=float, default=3e-4, help="annealed linearly to 0")
     p.add_argument("--gamma", type=float, default=0.99)
     p.add_argument("--gae-lambda", type=float, default=0.95)
     p.add_argument("--num-minibatches", type=int, default=8)
     p.add_argument("--update-epochs", type=int, default=10)
     p.add_argument("--clip-coef", type=float, default=0.2)
-    p.add_argument("--ent-coef", type=float, default=0.0)
+    p.add_argument("--ent-coef", type=float, default=0.01)
     p.add_argument("--vf-coef", type=float, default=0.5)
     p.add_argument("--max-grad-norm", type=float, default=0.5)
-    p.add_argument("--eval-episodes", type=int, default=200, help="greedy episodes at the end")
+    p.add_argument("--width", type=int, default=64, help="hidden units (two Tanh layers)")
+    p.add_argument(
+        "--failure-penalty",
+        type=float,
+        default=5.0,
+        help="training only: subtracted when the flight ends in NMAC or beyond the boundary",
+    )
+    p.add_argument(
+        "--los-penalty",
+        type=float,
+        default=1.0,
+        help="training only: subtracted from the reward at every step the ownship is in LoS",
+    )
+    p.add_argument("--threads", type=int, default=1, help="torch threads of this process")
+    p.add_argument("--eval-episodes", type=int, default=1000, help="validation episodes")
     p.add_argument("--save", default="runs/ppo-vector-env/policy.pt", help="state dict")
     return p.parse_args(argv)
 
@@ -53,17 +81,17 @@ def layer_init(layer: nn.Linear, std: float = np.sqrt(2), bias: float = 0.0) -> 
 
 
 class ActorCritic(nn.Module):
-    def __init__(self, n_obs: int, n_actions: int):
+    def __init__(self, n_obs: int, n_actions: int, width: int = 64):
         super().__init__()
         self.critic = nn.Sequential(
-            layer_init(nn.Linear(n_obs, 64)), nn.Tanh(),
-            layer_init(nn.Linear(64, 64)), nn.Tanh(),
-            layer_init(nn.Linear(64, 1), std=1.0),
+            layer_init(nn.Linear(n_obs, width)), nn.Tanh(),
+            layer_init(nn.Linear(width, width)), nn.Tanh(),
+            layer_init(nn.Linear(width, 1), std=1.0),
         )  # fmt: skip
         self.actor = nn.Sequential(
-            layer_init(nn.Linear(n_obs, 64)), nn.Tanh(),
-            layer_init(nn.Linear(64, 64)), nn.Tanh(),
-            layer_init(nn.Linear(64, n_actions), std=0.01),
+            layer_init(nn.Linear(n_obs, width)), nn.Tanh(),
+            layer_init(nn.Linear(width, width)), nn.Tanh(),
+            layer_init(nn.Linear(width, n_actions), std=0.01),
         )  # fmt: skip
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
@@ -78,13 +106,15 @@ class ActorCritic(nn.Module):
 def main(argv: list[str] | None = None) -> dict[str, float]:
     args = parse_args(argv)
     torch.manual_seed(args.seed)
-    torch.set_num_threads(1)  # small networks: threads cost more than they bring
+    torch.set_num_threads(args.threads)  # 1: small networks, threads cost more than they bring
     batch_size = args.num_envs * args.num_steps
     minibatch_size = batch_size // args.num_minibatches
     num_updates = max(1, args.total_timesteps // batch_size)
 
     # The native vector env: observations (N, 42), masks in infos["action_mask"] (N, 27),
-    # same-step auto-reset (the ended episode's outcome is in infos["final_info"]).
+    # same-step auto-reset (the ended episode's outcome is in infos["final_info"]), and the
+    # step's reward terms in infos["reward_terms"] (N, 7): the los/nmac columns are < 0 while the
+    # ownship is in LoS.
     envs = gym.make_vec(
         "cdr_bench/Ownship-v0",
         num_envs=args.num_envs,
@@ -93,7 +123,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     )
     n_obs = envs.single_observation_space.shape[0]
     n_actions = envs.single_action_space.n
-    agent = ActorCritic(n_obs, n_actions)
+    agent = ActorCritic(n_obs, n_actions, args.width)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
 
     obs_buf = torch.zeros((args.num_steps, args.num_envs, n_obs))
@@ -109,8 +139,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     next_mask = torch.as_tensor(info["action_mask"].astype(bool))
     next_done = torch.zeros(args.num_envs)
     episode_return = np.zeros(args.num_envs)
+    had_los = np.zeros(args.num_envs, dtype=bool)  # this flight has been in LoS
     returns: deque[float] = deque(maxlen=100)
     outcomes: deque[str] = deque(maxlen=100)
+    clean: deque[bool] = deque(maxlen=100)  # training log only: goal reached, never in LoS
     global_step, invalid, start = 0, 0, time.time()
 
     for update in range(1, num_updates + 1):
@@ -130,15 +162,24 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
             obs_np, reward, term, trunc, info = envs.step(action.numpy())
             done = term | trunc
-            rew_buf[step] = torch.as_tensor(reward, dtype=torch.float32)
+            in_los = (info["reward_terms"][:, IN_LOS] < 0).any(axis=1)
+            # The benchmark's reward minus the training-only LoS penalty (and, below, the
+            # failure penalty when a flight ends): what is scored and what episode_return logs
+            # is the benchmark's reward alone.
+            shaped = reward - args.los_penalty * in_los
+            rew_buf[step] = torch.as_tensor(shaped, dtype=torch.float32)
             next_obs = torch.as_tensor(obs_np)
             next_mask = torch.as_tensor(info["action_mask"].astype(bool))
             next_done = torch.as_tensor(done, dtype=torch.float32)
             episode_return += reward
+            had_los |= in_los
             for e in np.flatnonzero(done):
                 returns.append(float(episode_return[e]))
                 outcomes.append(info["final_info"][e]["outcome"])
-                episode_return[e] = 0.0
+                if outcomes[-1] in FAILURES:
+                    rew_buf[step, e] -= args.failure_penalty
+                clean.append(outcomes[-1] == "success" and not had_los[e])
+                episode_return[e], had_los[e] = 0.0, False
 
         # -- generalised advantage estimation ---------------------------------------------------
         with torch.no_grad():
@@ -193,6 +234,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             "success_100": round(outcomes.count("success") / len(outcomes), 3)
             if outcomes
             else None,
+            "clean_100": round(sum(clean) / len(clean), 3) if clean else None,
             "pg_loss": round(pg_loss.item(), 5),
             "v_loss": round(v_loss.item(), 5),
             "entropy": round(entropy.item(), 4),
@@ -202,35 +244,52 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         print(json.dumps(row), flush=True)
     envs.close()
 
-    # -- the trained policy, greedy (masked argmax), on fresh episodes -----------------------------
+    # -- the trained policy, scored by the package's evaluator ---------------------------------
     Path(args.save).parent.mkdir(parents=True, exist_ok=True)
     torch.save(agent.state_dict(), args.save)
-    summary = evaluate(agent, args.scenario, args.eval_episodes, seed=args.seed + 10_000)
-    summary.update(global_step=global_step, invalid_actions=invalid, saved=args.save)
+    minutes = (time.time() - start) / 60
+    summary = score(args.save, args.scenario, args.eval_episodes, Path(args.save).parent)
+    summary.update(
+        global_step=global_step, invalid_actions=invalid, train_minutes=round(minutes, 2),
+        saved=args.save,
+    )  # fmt: skip
     print(json.dumps(summary), flush=True)
     return summary
 
 
-def evaluate(agent: ActorCritic, scenario: str, episodes: int, seed: int) -> dict[str, float]:
-    """Greedy success rate on ``episodes`` fresh episodes, stepped together."""
-    envs = gym.make_vec(
-        "cdr_bench/Ownship-v0",
-        num_envs=episodes,
-        vectorization_mode="vector_entry_point",
-        scenario=scenario,
-    )
-    obs, info = envs.reset(seed=seed)
-    outcome: list[str | None] = [None] * episodes
-    while any(o is None for o in outcome):
-        with torch.no_grad():
-            logits = agent.dist(torch.as_tensor(obs), torch.as_tensor(info["action_mask"] > 0))
-            action = logits.probs.argmax(-1).numpy()
-        obs, _, term, trunc, info = envs.step(action)
-        for e in np.flatnonzero(term | trunc):
-            if outcome[e] is None:  # the first episode of each slot only
-                outcome[e] = info["final_info"][e]["outcome"]
-    envs.close()
-    return {"eval_episodes": episodes, "eval_success_rate": outcome.count("success") / episodes}
+def score(policy: str, scenario: str, episodes: int, out: Path) -> dict:
+    """The greedy policy (masked argmax: ``agents/ppo_tutorial`` loading ``policy``), Direct and
+    MVP on the same ``episodes`` validation episodes of ``scenario`` (the evaluator of
+    ``cdr-bench evaluate ... --split validation``), and the paired differences in clean success
+    (``cdr-bench compare``: B - A per episode, 95 % bootstrap interval, McNemar's exact test)."""
+    jobs, _ = resolve_jobs([scenario], None, episodes)
+    for name, agent in (("ppo", AGENT), ("direct", "direct"), ("mvp", "mvp")):
+        if name == "ppo":  # the agent loads this state dict instead of its shipped policy.pt
+            os.environ["CDR_BENCH_CHECKPOINT"] = str(Path(policy).resolve())
+        try:
+            run = evaluate(
+                agent, jobs, out / f"{name}.json", base_seed=SPLITS["validation"], progress=False
+            )
+        finally:
+            os.environ.pop("CDR_BENCH_CHECKPOINT", None)
+        print(summary_text(run), flush=True)
+    ours = read_result(out / "ppo.json")["scenarios"][0]["metrics"]["ownship"]
+    summary = {
+        "eval_split": "validation",
+        "eval_episodes": episodes,
+        "clean_success": ours["clean_success_rate"]["value"],
+        "clean_success_ci95": ours["clean_success_rate"]["ci95"],
+        "success": ours["success_rate"]["value"],
+        "los": ours["los_rate"]["value"],
+    }
+    for base in ("direct", "mvp"):
+        cmp = compare(out / f"{base}.json", out / "ppo.json", metrics=["clean_success_rate"])
+        print(comparison_table(cmp), flush=True)
+        (row,) = [r for r in cmp["rows"] if r["aircraft"] == "ownship"]
+        summary[f"{base}_clean_success"] = row["a"]
+        summary[f"minus_{base}"] = row["diff"]  # ppo - base, on the same episodes
+        summary[f"minus_{base}_ci95"] = row["ci95"]
+    return summary
 
 
 if __name__ == "__main__":

@@ -101,6 +101,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     out = Path(a.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
 
+    torch.set_num_threads(1)  # one thread: sampling and the learner run in this process
     ray.init(num_cpus=1, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
     algo = ppo_config(a.scenario, a.batch, minibatch, a.seed).build_algo(
         logger_creator=lambda cfg: UnifiedLogger(cfg, str(out / "logs"), loggers=None)

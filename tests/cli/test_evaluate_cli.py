@@ -180,6 +180,33 @@ def test_evaluate_writes_summary_and_result_files(cdr, tmp_path):
     assert not out.with_suffix(".partial.jsonl").exists()
 
 
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def test_agent_process_runs_one_thread_unless_told(cdr, tmp_path, monkeypatch):
+    """The agent's process gets one thread per library by default; a caller's setting wins."""
+    agent = write_agent(
+        tmp_path,
+        f"""
+        import os, sys
+        class Agent:
+            def __init__(self, observation_space, action_space):
+                got = [os.environ.get(k) for k in {THREAD_VARS!r}]
+                print("threads", *got, file=sys.stderr, flush=True)
+            def act(self, observation):
+                mask = observation["action_mask"]
+                return 13 if mask[13] else int(mask.argmax())
+        """,
+    )
+    for var in THREAD_VARS:
+        monkeypatch.delenv(var, raising=False)
+    r = evaluate(cdr, agent, tmp_path / "one.json", episodes=1)
+    assert r.returncode == 0 and "threads 1 1 1" in r.stderr, r.stderr
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    r = evaluate(cdr, agent, tmp_path / "three.json", episodes=1)
+    assert r.returncode == 0 and "threads 3 1 1" in r.stderr, r.stderr
+
+
 def test_template_agent_and_default_output_path(cdr, tmp_path):
     mine = tmp_path / "my_agent"
     mine.mkdir()
