@@ -34,10 +34,12 @@ def test_spaces_for_every_agent_and_mask_key():
         pytest.fail("episode did not end")
 
 
-def test_rllib_env_checker_accepts_it():
+@pytest.mark.parametrize("scenario", ["marl/low-2", "marl/high-all"])
+def test_rllib_env_checker_accepts_it(scenario):
+    """Learning intruders, and every aircraft of the sector controlled (49 agents)."""
     from ray.rllib.utils.pre_checks.env import check_multiagent_environments
 
-    check_multiagent_environments(CDRMultiAgentEnv({"scenario": "marl/low-2"}))
+    check_multiagent_environments(CDRMultiAgentEnv({"scenario": scenario}))
 
 
 # A PPO run with one shared policy: tests/test_docs_site.py::test_rllib_tutorial (the tutorial
