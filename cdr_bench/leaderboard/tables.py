@@ -495,6 +495,20 @@ def headline(repo: Repo) -> str:
     return "\n\n".join([*conclusion(data), md_table(head, rows, numeric_from=3)])
 
 
+def multi_agent(repo: Repo) -> str:
+    """The multi-agent track's generated conclusion and ranking, from the committed
+    ``leaderboard.json`` (the same functions as the leaderboard's pages)."""
+    from cdr_bench.leaderboard import multi_agent as ma
+
+    track = _read_json(repo.lb_dir / "leaderboard.json").get("multi_agent")
+    if not track:
+        return "No multi-agent entry yet."
+    head, rows, _ = ma.ranking_table(track)
+    return "\n\n".join(
+        [*ma.conclusion(track, ma._names(track)), md_table(head, rows, numeric_from=3)]
+    )
+
+
 def claims(repo: Repo) -> str:
     """The paper's claims and our verdicts, from the committed ``leaderboard.json``."""
     data = _read_json(repo.lb_dir / "leaderboard.json")
@@ -507,6 +521,7 @@ Block = Callable[[Repo], str]
 DOC_BLOCKS: dict[str, dict[str, Block]] = {
     "README.md": {
         "headline": headline,
+        "multi-agent": multi_agent,
         "claims": claims,
         "learned-agents": lambda r: measured(r, LEARNED, DENSITIES),
         "reference-agents": lambda r: measured(r, CLASSICAL, ci=False),
