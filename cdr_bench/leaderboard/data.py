@@ -780,6 +780,29 @@ def seed_aggregates(
     }
 
 
+def entry_facts(e: Entry) -> dict[str, Any]:
+    """What the pages show of an entry beside its numbers: its submission and its result's
+    provenance."""
+    return {
+        "name": e.name,
+        "display_name": e.sub.display_name,
+        "description": e.sub.description,
+        "group": e.sub.group,
+        "agent": e.sub.agent,
+        "checkpoint": e.sub.checkpoint,
+        "authors": list(e.sub.authors),
+        "reference": e.sub.reference,
+        "training": e.sub.training,
+        "training_logs": list(e.sub.training_logs),
+        "published_as": list(e.sub.published_as),
+        "agent_sha256": e.result["agent"]["sha256"],
+        "result_file": f"results/{e.path.name}",
+        "base_seed": e.result["base_seed"],
+        "batch_size": e.result["batch_size"],
+        "cdr_bench_version": e.result["versions"].get("cdr-bench"),
+    }
+
+
 def build_data(
     entries: list[Entry],
     published: Published,
@@ -930,28 +953,7 @@ def build_data(
         "reference": reference,
         "scenarios": scenario_ids,
         "groups": [*GROUPS, "published"],
-        "entries": [
-            {
-                "name": e.name,
-                "display_name": e.sub.display_name,
-                "description": e.sub.description,
-                "group": e.sub.group,
-                "agent": e.sub.agent,
-                "checkpoint": e.sub.checkpoint,
-                "authors": list(e.sub.authors),
-                "reference": e.sub.reference,
-                "training": e.sub.training,
-                "training_logs": list(e.sub.training_logs),
-                "budget": info[e.name][0],
-                "published_as": list(e.sub.published_as),
-                "agent_sha256": e.result["agent"]["sha256"],
-                "result_file": f"results/{e.path.name}",
-                "base_seed": e.result["base_seed"],
-                "batch_size": e.result["batch_size"],
-                "cdr_bench_version": e.result["versions"].get("cdr-bench"),
-            }
-            for e in entries
-        ],
+        "entries": [entry_facts(e) | {"budget": info[e.name][0]} for e in entries],
         "ranking": ranking,
         "seeds": seed_aggregates(
             entries,

@@ -142,6 +142,8 @@ def _system(e: Entry, sid: str) -> dict[str, Any]:
 
 def track_data(entries: list[Entry]) -> dict[str, Any] | None:
     """Everything the pages show of the multi-agent track (None: no entry in it)."""
+    from cdr_bench.leaderboard.data import entry_facts
+
     if not entries:
         return None
     missing = [e.name for e in entries if e.scenario(HEADLINE_SCENARIO) is None]
@@ -214,21 +216,7 @@ def track_data(entries: list[Entry]) -> dict[str, Any] | None:
         "episodes": n,
         "metrics": {k: get_metric(k).header for k in SHOWN},
         "higher": {k: get_metric(k).higher for k in SHOWN},
-        "entries": [
-            {
-                "name": e.name,
-                "display_name": e.sub.display_name,
-                "description": e.sub.description,
-                "group": e.sub.group,
-                "agent": e.sub.agent,
-                "checkpoint": e.sub.checkpoint,
-                "training": e.sub.training,
-                "agent_sha256": e.result["agent"]["sha256"],
-                "result_file": f"results/{e.path.name}",
-                "base_seed": e.result["base_seed"],
-            }
-            for e in order
-        ],
+        "entries": [entry_facts(e) for e in order],
         "ranking": [
             {
                 "entry": e.name,
