@@ -17,7 +17,10 @@ its own generators, and the tensor operations of the GPU path round differently 
 compiled kernels), so their data and losses differ after the first actions: they are
 *comparable*, not equal. The check: for every loss key, ``|cuda - cpu| <= 0.5 max(|cpu|,
 |cuda|)`` (within a factor of 2) or ``|cuda - cpu| <= 0.05`` (keys near zero, e.g. a policy
-gradient loss). A failed key is reported and the script exits 1.
+gradient loss). A failed key is reported and the script exits 1. Only the losses are checked
+(keys named ``loss*`` or ``*loss``; statistics such as ``q_mean`` are printed). ``--calibrate``
+adds a CPU run with seed 2 and applies the same check to the two CPU seeds: what the tolerance
+has to allow.
 
 Without CUDA the CPU part runs, the script says that CUDA is not available and exits 0.
 """
@@ -58,14 +61,14 @@ def plan(name: str, updates: int) -> tuple[dict[str, Any], int]:
     return {"total_steps": total, "learning_starts": LEARNING_STARTS}, updates
 
 
-def run_one(name: str, device: str, updates: int, run_dir: str) -> dict[str, Any]:
+def run_one(name: str, device: str, updates: int, run_dir: str, seed: int = 1) -> dict[str, Any]:
     """Train ``name`` on ``device``; its speed and the losses of the last half of the log."""
     from cdr_bench.rl.cli import TRAINERS
 
     module = importlib.import_module(TRAINERS[name])
     flags, n_updates = plan(name, updates)
     common = dict(
-        run_dir=run_dir, device=device, seed=1, progress=False, eval_episodes=0, curve_every=0,
+        run_dir=run_dir, device=device, seed=seed, progress=False, eval_episodes=0, curve_every=0,
         checkpoint_every=10**9, log_every=max(1, flags["total_steps"] // 8), **flags,
     )  # fmt: skip
     t0 = time.perf_counter()
@@ -104,6 +107,12 @@ def run_one(name: str, device: str, updates: int, run_dir: str) -> dict[str, Any
     }
 
 
+def is_loss(key: str) -> bool:
+    """The keys compared: the losses (``loss_q``, ``value_loss``, ...), not the statistics
+    logged beside them (``q_mean``, ``target_max``: printed, not checked)."""
+    return key.startswith("loss") or key.endswith("loss")
+
+
 def comparable(a: float, b: float) -> bool:
     d = abs(a - b)
     return d <= REL_TOL * max(abs(a), abs(b)) or d <= ABS_TOL
@@ -113,6 +122,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--updates", type=int, default=2_000, help="updates per run (default 2000)")
     p.add_argument("--algorithms", nargs="+", default=[*OFF_POLICY, *SB3])
+    p.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="also train each algorithm on the CPU with seed 2 and apply the loss check to the\n"
+        "two CPU seeds (what the tolerance must allow: another random stream)",
+    )
     p.add_argument("--json", help="also write the results to this file")
     ns = p.parse_args(argv)
 
@@ -127,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     if cuda:
         torch.zeros(1, device="cuda")  # the CUDA context, before any timing
     devices = ["cpu", "cuda"] if cuda else ["cpu"]
+    if ns.calibrate:
+        devices.append("cpu-seed-2")
     results: dict[str, dict[str, Any]] = {}
     failed = []
     t_start = time.perf_counter()
@@ -134,7 +151,9 @@ def main(argv: list[str] | None = None) -> int:
         for name in ns.algorithms:
             results[name] = {}
             for dev in devices:
-                r = run_one(name, dev, ns.updates, os.path.join(tmp, f"{name}-{dev}"))
+                seed = 2 if dev == "cpu-seed-2" else 1
+                where = dev.split("-")[0]
+                r = run_one(name, where, ns.updates, os.path.join(tmp, f"{name}-{dev}"), seed)
                 results[name][dev] = r
                 print(
                     f"{name:>13} {dev:>4}: {r['updates']:>6} updates in {r['wall_s']:6.1f} s, "
@@ -143,24 +162,27 @@ def main(argv: list[str] | None = None) -> int:
                     + ", ".join(f"{k}={v:.4g}" for k, v in r["losses"].items()),
                     flush=True,
                 )
-            if cuda:
-                c, g = results[name]["cpu"], results[name]["cuda"]
+            c = results[name]["cpu"]
+            for other in devices[1:]:
+                g = results[name][other]
+                keys = sorted(k for k in {*c["losses"], *g["losses"]} if is_loss(k))
                 bad = [
                     k
-                    for k in c["losses"]
-                    if k in g["losses"] and not comparable(c["losses"][k], g["losses"][k])
+                    for k in keys
+                    if k not in c["losses"]
+                    or k not in g["losses"]
+                    or not comparable(c["losses"][k], g["losses"][k])
                 ]
-                missing = sorted(set(c["losses"]) ^ set(g["losses"]))
                 speed = g["updates_per_s"] / c["updates_per_s"]
-                verdict = "comparable" if not bad and not missing else f"NOT comparable: {bad}"
-                print(f"{name:>13}: cuda / cpu updates/s {speed:.2f}x; losses {verdict}")
-                if bad or missing:
-                    failed.append(name)
+                verdict = "comparable" if keys and not bad else f"NOT comparable: {bad or keys}"
+                print(f"{name:>13}: {other} / cpu updates/s {speed:.2f}x; losses {verdict}")
+                if bad or not keys:
+                    failed.append(f"{name} ({other})")
     print(f"total {time.perf_counter() - t_start:.0f} s")
     if ns.json:
         with open(ns.json, "w") as f:
             json.dump(results, f, indent=1)
-    if not cuda:
+    if not cuda and not failed:
         print("CUDA is not available here: the CPU part ran, the CUDA part and the comparison")
         print("were skipped (run this script on a machine with a CUDA device and a CUDA torch).")
         return 0
