@@ -39,6 +39,8 @@ import time
 from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _checkout import positive_int  # noqa: E402
 
 OFF_POLICY = ("diffusion-ac", "rainbow", "safe-dqn-x")
 SB3 = ("ppo", "maskable-ppo", "td3")
@@ -120,8 +122,12 @@ def comparable(a: float, b: float) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--updates", type=int, default=2_000, help="updates per run (default 2000)")
-    p.add_argument("--algorithms", nargs="+", default=[*OFF_POLICY, *SB3])
+    p.add_argument(
+        "--updates", type=positive_int, default=2_000, help="updates per run (default 2000)"
+    )
+    p.add_argument(
+        "--algorithms", nargs="+", default=[*OFF_POLICY, *SB3], choices=[*OFF_POLICY, *SB3]
+    )
     p.add_argument(
         "--calibrate",
         action="store_true",
