@@ -85,7 +85,8 @@ def run_one(name: str, device: str, updates: int, run_dir: str, seed: int = 1) -
     rows = [json.loads(line) for line in open(os.path.join(run_dir, "log.jsonl"))]
     rows = [r for r in rows if "charts/success_rolling" in r]
     # speed between the first and the last log line (set-up and the first interval left out)
-    first, last = rows[0], rows[-1]
+    timed = [r for r in rows if r["step"] >= LEARNING_STARTS]  # updating (TD3 and off-policy)
+    first, last = (timed[0], timed[-1]) if len(timed) > 1 else (rows[0], rows[-1])
     span = last["wall_s"] - first["wall_s"]
     steps = last["step"] - first["step"]
     done = (last["updates"] - first["updates"]) if "updates" in last else None
