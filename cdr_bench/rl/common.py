@@ -59,13 +59,13 @@ class TrainArgs:
     """stop (and finish normally) after this wall time; 0 = no limit"""
     threads: int = 1
     """torch intra-op threads"""
-    device: str = "cpu"
-    """where the networks train: cpu (the tested, deterministic default), cuda, or auto (cuda
-    if available); collection stays on the host"""
     resume: bool = False
     """continue exactly from the state saved in run_dir"""
     n_envs: int = 32
     """parallel episodes in the batched simulator"""
+    device: str = "cpu"
+    """where the networks train: cpu (the tested, deterministic default), cuda, or auto (cuda
+    if available); collection stays on the host"""
     scenario: str = "medium"
     """training scenario without the curriculum"""
     failure_penalty: float = 5.0
