@@ -38,6 +38,14 @@ Run: ``python benchmarks/train_throughput.py [--reference 70fce2e] [--rounds 3]
 [--algorithms diffusion-ac rainbow] [--transitions 4000] [--threads 1]``; ``--reference none``
 measures the current checkout only. The reference is checked out with ``git worktree`` into
 ``.bench/<commit>`` (ignored).
+
+``--n-envs 1 8 16 32`` instead compares numbers of parallel episodes (``--n-envs`` of the
+trainers: the loop steps N episodes together and acts for all their flying aircraft in one
+call; one update per ``update_every`` transitions whatever N) on the current checkout: each
+round one worker process trains each algorithm at each N in turn (the same process, so the same
+machine state, numba and torch warmed up once), each run measured as above; the table gives
+medians over rounds of transitions/s and updates/s in wall time, their ratio to the first N, and
+the CPU time per transition of acting and of the updates.
 """
 
 from __future__ import annotations
@@ -120,7 +128,8 @@ class _Timers:
 
 
 def _worker(args: argparse.Namespace) -> None:
-    """Measure one algorithm in this process (``--worker``): prints one JSON line."""
+    """Measure one algorithm in this process (``--worker``): prints one JSON line per
+    ``--n-envs`` value (one line at the shipped run's number of episodes without it)."""
     if args.code:  # the reference checkout: bypass the editable install of the current one
         sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in repr(f).lower()]
         sys.path.insert(0, args.code)
@@ -174,45 +183,57 @@ def _worker(args: argparse.Namespace) -> None:
         advance(self, step, n, env)
 
     RunLog.advance = advanced  # type: ignore[method-assign]
-    with tempfile.TemporaryDirectory() as tmp:
-        a = trainer.Args(
-            run_dir=tmp,
-            seed=1,
-            total_steps=total,
-            threads=args.threads,
-            progress=False,
-            eval_episodes=0,
-            checkpoint_every=10 * total,
-            **flags,
-        )
-        offpolicy.train(trainer.ALGORITHM, a)
+    for n_envs in args.n_envs or [None]:
+        marks.clear()
+        timers.cpu.clear()
+        timers.calls.clear()
+        with tempfile.TemporaryDirectory() as tmp:
+            a = trainer.Args(
+                run_dir=tmp,
+                seed=1,
+                total_steps=total,
+                threads=args.threads,
+                progress=False,
+                eval_episodes=0,
+                checkpoint_every=10 * total,
+                **flags,
+                **({"n_envs": n_envs} if n_envs else {}),
+            )
+            offpolicy.train(trainer.ALGORITHM, a)
 
-    (w0, c0, s0), (w1, c1, s1) = marks[0], marks[-1]
-    wall, cpu, n = w1 - w0, c1 - c0, s1 - s0
-    parts = {p: timers.cpu.get(p, 0.0) for p in PARTS if p != "loop"}
-    parts["loop"] = cpu - sum(parts.values())
-    out = {
-        "algorithm": args.algorithm,
-        "transitions": n,
-        "wall_per_s": n / wall,
-        "cpu_per_s": n / cpu,
-        "us_per_transition": {p: 1e6 * v / n for p, v in parts.items()},
-        "calls": dict(timers.calls),
-        "code": os.path.dirname(importlib.import_module("cdr_bench").__file__ or ""),
-        "torch": torch.__version__,
-        "threads": torch.get_num_threads(),
-    }
-    print(json.dumps(out))
+        (w0, c0, s0), (w1, c1, s1) = marks[0], marks[-1]
+        wall, cpu, n = w1 - w0, c1 - c0, s1 - s0
+        parts = {p: timers.cpu.get(p, 0.0) for p in PARTS if p != "loop"}
+        parts["loop"] = cpu - sum(parts.values())
+        updates = timers.calls.get("update: forward", 0)
+        out = {
+            "algorithm": args.algorithm,
+            "n_envs": a.n_envs,
+            "transitions": n,
+            "updates": updates,
+            "wall_per_s": n / wall,
+            "cpu_per_s": n / cpu,
+            "updates_wall_per_s": updates / wall,
+            "us_per_transition": {p: 1e6 * v / n for p, v in parts.items()},
+            "calls": dict(timers.calls),
+            "code": os.path.dirname(importlib.import_module("cdr_bench").__file__ or ""),
+            "torch": torch.__version__,
+            "threads": torch.get_num_threads(),
+        }
+        print(json.dumps(out), flush=True)
 
 
 # --------------------------------------------------------------------------------------------
 # The driver
 
 
-def _measure(args: argparse.Namespace, algorithm: str, code: str | None) -> dict[str, Any]:
+def _measure(args: argparse.Namespace, algorithm: str, code: str | None) -> Any:
+    """One worker's measurement (a list of them, one per N, with ``--n-envs``)."""
     cmd = [sys.executable, __file__, "--worker", "--algorithm", algorithm]
     cmd += ["--transitions", str(args.transitions), "--warmup", str(args.warmup)]
     cmd += ["--threads", str(args.threads)]
+    if args.n_envs:
+        cmd += ["--n-envs", *map(str, args.n_envs)]
     if code:
         cmd += ["--code", code]
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
@@ -220,10 +241,52 @@ def _measure(args: argparse.Namespace, algorithm: str, code: str | None) -> dict
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     if out.returncode != 0:
         raise SystemExit(f"worker failed ({algorithm}, {code or 'current'}):\n{out.stderr[-3000:]}")
-    result: dict[str, Any] = json.loads(out.stdout.strip().splitlines()[-1])
+    lines = [x for x in out.stdout.strip().splitlines() if x.startswith("{")]
+    if args.n_envs:
+        return [json.loads(x) for x in lines]
+    result: dict[str, Any] = json.loads(lines[-1])
     if code and not result["code"].startswith(code):
         raise SystemExit(f"the reference run imported {result['code']}, not {code}")
     return result
+
+
+def _n_envs_sweep(args: argparse.Namespace) -> None:
+    """``--n-envs``: each algorithm at each N, the current checkout; a table of medians."""
+    runs: dict[str, list[list[dict[str, Any]]]] = {a: [] for a in args.algorithms}
+    t0 = time.time()
+    for i in range(args.rounds):
+        for algorithm in args.algorithms:
+            runs[algorithm].append(_measure(args, algorithm, None))
+            print(f"round {i + 1}/{args.rounds} {algorithm} done", file=sys.stderr, flush=True)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    torch_version = runs[args.algorithms[0]][0][0]["torch"]
+    print(
+        f"`{platform.machine()}, python {platform.python_version()}, torch {torch_version}, "
+        f"{args.threads} torch thread(s), OMP_NUM_THREADS=1, {args.rounds} round(s) of "
+        f"{args.transitions} transitions after {args.warmup} of warm-up per N, "
+        f"{time.time() - t0:.0f} s, load average at the end {load:.1f}, {_git_head()}`"
+    )
+    print()
+    print(
+        "| algorithm | N (--n-envs) | transitions/s | updates/s | transitions/s vs "
+        f"N={args.n_envs[0]} | act µs/transition | update µs/transition |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    update_parts = [p for p in PARTS if p.startswith("update") or p == "replay sample"]
+    for algorithm, rounds in runs.items():
+        for j, n in enumerate(args.n_envs):
+            rows = [r[j] for r in rounds]
+            tps = _median(rows, lambda x: x["wall_per_s"])
+            ups = _median(rows, lambda x: x["updates_wall_per_s"])
+            ratio = statistics.median(r[j]["wall_per_s"] / r[0]["wall_per_s"] for r in rounds)
+            act = _median(rows, lambda x: x["us_per_transition"]["act"])
+            upd = _median(rows, lambda x: sum(x["us_per_transition"][p] for p in update_parts))
+            print(
+                f"| {algorithm} | {n} | {tps:,.0f} | {ups:,.0f} | {ratio:.2f}x | {act:,.0f} "
+                f"| {upd:,.0f} |"
+            )
+    if args.json:
+        Path(args.json).write_text(json.dumps(runs, indent=1))
 
 
 def _median(rows: list[dict[str, Any]], key: Callable[[dict[str, Any]], float]) -> float:
@@ -251,6 +314,12 @@ def main() -> None:
     p.add_argument(
         "--threads", type=positive_int, default=1, help="torch threads (the trainers' flag)"
     )
+    p.add_argument(
+        "--n-envs",
+        type=positive_int,
+        nargs="+",
+        help="compare these numbers of parallel episodes (current checkout only)",
+    )
     p.add_argument("--json", help="also write every measurement here")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--algorithm", help=argparse.SUPPRESS)
@@ -258,6 +327,9 @@ def main() -> None:
     args = p.parse_args()
     if args.worker:
         _worker(args)
+        return
+    if args.n_envs:
+        _n_envs_sweep(args)
         return
 
     ref = None if args.reference == "none" else _checkout(args.reference)

@@ -36,3 +36,12 @@ def test_zero_rounds(script: str) -> None:
     r = _run(script, flag, "0")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert f"argument {flag}: expected a whole number >= 1, got 0" in r.stderr
+
+
+def test_gpu_check_refuses_bad_arguments_in_one_line() -> None:
+    r = _run("gpu_check", "--updates", "0")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "argument --updates: expected a whole number >= 1, got 0" in r.stderr
+    r = _run("gpu_check", "--algorithms", "dqn")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "invalid choice: 'dqn'" in r.stderr

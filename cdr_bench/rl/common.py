@@ -64,6 +64,9 @@ class TrainArgs:
     """continue exactly from the state saved in run_dir"""
     n_envs: int = 32
     """parallel episodes in the batched simulator"""
+    device: str = "cpu"
+    """where the networks train: cpu (the tested, deterministic default), cuda, or auto (cuda
+    if available); collection stays on the host"""
     scenario: str = "medium"
     """training scenario without the curriculum"""
     failure_penalty: float = 5.0

@@ -62,6 +62,15 @@ class Schedule:
             for a, b, s in zip(self.coef_y0, self.coef_yt, self.beta_tilde.sqrt(), strict=True)
         ]
 
+    def to(self, device: torch.device | str) -> Schedule:
+        """The constant tensors moved to ``device`` (in place; returns self)."""
+        for name in ("beta", "alpha", "alpha_bar", "beta_tilde", "coef_y0", "coef_yt"):
+            setattr(self, name, getattr(self, name).to(device))
+        return self
+
+    def tensors(self) -> list[torch.Tensor]:
+        return [self.beta, self.alpha, self.alpha_bar, self.beta_tilde, self.coef_y0, self.coef_yt]
+
     def q_sample(self, y0: torch.Tensor, t: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
         """Eq. 28/40: y_t = sqrt(abar_t) y0 + sqrt(1 - abar_t) eps; y0 (N, K), t (N,) long."""
         a = self.alpha_bar.to(y0.device)[t].unsqueeze(-1)

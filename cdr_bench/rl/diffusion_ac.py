@@ -62,12 +62,12 @@ class Policy(torch.nn.Module):
             return self.net(obs)
         sch, n = self.schedule, obs.shape[0]
         c = self.net.condition(self.net.encode(obs), sch.T)  # shared by the T steps
-        y = torch.randn(n, N_ACTIONS, generator=generator)
+        y = torch.randn(n, N_ACTIONS, generator=generator, device=obs.device)
         for t in range(sch.T, 0, -1):
             y0_hat = self.net.denoise(c, y, t)
             if t == 1:  # alpha_bar_0 = 1: the mean is y0_hat and beta_tilde_1 = 0
                 return y0_hat
-            z = torch.randn(n, N_ACTIONS, generator=generator)
+            z = torch.randn(n, N_ACTIONS, generator=generator, device=obs.device)
             y = sch.reverse_step(y0_hat, y, t, z)
         return y  # pragma: no cover
 
@@ -133,6 +133,9 @@ class DiffusionAC(LearnerParts):
 
     Args:
         seed: seeds the generator of the exploring actions.
+        device: where the networks, the optimisers' state, the generators and the updates
+            live (the modules are built on the CPU, so their initial weights do not depend on
+            it, then moved).
         explore: action selection while training: "sample" from the masked softmax (Eq. 33) or
             "argmax" (the inference rule).
         tau: the teacher temperature as a function of the DPSC stage (None without the
@@ -149,10 +152,13 @@ class DiffusionAC(LearnerParts):
         seed: int = 0,
         explore: str = "sample",
         tau: Callable[[int | None], float] | None = None,
+        device: str | torch.device = "cpu",
     ):
         self.cfg, self.ucfg = cfg, ucfg
-        self.policy = Policy(cfg)
-        self.critic = TwinCritic(cfg.obs_dim, cfg.critic_width, twin=cfg.twin)
+        self.device = torch.device(device)
+        self.policy = Policy(cfg).to(self.device)
+        self.policy.schedule.to(self.device)
+        self.critic = TwinCritic(cfg.obs_dim, cfg.critic_width, twin=cfg.twin).to(self.device)
         self.critic_target: Any = frozen_copy(self.critic)
         # one flat tensor per optimised module (after the target's copy)
         self.flat_actor, self.flat_critic = FlatParameters(self.policy), FlatParameters(self.critic)
@@ -161,8 +167,8 @@ class DiffusionAC(LearnerParts):
         self.explore, self.tau_schedule = explore, tau
         self.tau = 1.0
         """teacher temperature of :meth:`update`"""
-        self.generator = torch.Generator().manual_seed(seed)
-        self.eval_generator = torch.Generator().manual_seed(12345)
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.eval_generator = torch.Generator(self.device).manual_seed(12345)
 
     def schedule(self, step: int, stage: int | None) -> dict[str, float]:
         if self.tau_schedule is not None:
@@ -174,8 +180,9 @@ class DiffusionAC(LearnerParts):
         masked head (the paper's inference) with a generator of its own."""
         gen = self.generator if explore else self.eval_generator
         sample = explore and self.explore == "sample"
-        o, m = torch.from_numpy(obs), torch.from_numpy(mask)
-        return self.policy.act(o, m, gen, sample=sample).numpy()
+        o = torch.from_numpy(obs).to(self.device)
+        m = torch.from_numpy(mask).to(self.device)
+        return self.policy.act(o, m, gen, sample=sample).cpu().numpy()
 
     def teacher(self, obs: torch.Tensor, mask: torch.Tensor, tau: float) -> torch.Tensor:
         """Eq. 37: softmax(min Q / tau) over feasible classes; tau = inf -> uniform over them.
@@ -246,7 +253,7 @@ class DiffusionAC(LearnerParts):
             )
         # (C) forward diffusion, (D) denoising regression + terminal CE (Eq. 39-41).
         n = obs.shape[0]
-        t = torch.randint(1, sch.T + 1, (n,))
+        t = torch.randint(1, sch.T + 1, (n,), device=obs.device)
         yt = sch.q_sample(target, t, torch.randn_like(target))
         net = self.policy.net
         c = net.condition(net.encode(obs), sch.T)  # shared by both terms

@@ -111,11 +111,12 @@ def fit_policy(
     teacher before and after, and the last epoch's losses."""
     import torch
 
-    obs = torch.as_tensor(data["obs"], dtype=torch.float32)
-    mask = torch.as_tensor(data["mask"] != 0)
-    act = torch.as_tensor(data["action"], dtype=torch.int64)
-    ret = torch.as_tensor(data["ret"], dtype=torch.float32)
-    has_ret = torch.as_tensor(data["has_ret"], dtype=torch.float32)
+    dev = policy.device  # the demonstrations on the policy's device
+    obs = torch.as_tensor(data["obs"], dtype=torch.float32, device=dev)
+    mask = torch.as_tensor(data["mask"] != 0, device=dev)
+    act = torch.as_tensor(data["action"], dtype=torch.int64, device=dev)
+    ret = torch.as_tensor(data["ret"], dtype=torch.float32, device=dev)
+    has_ret = torch.as_tensor(data["has_ret"], dtype=torch.float32, device=dev)
     gen = torch.Generator().manual_seed(seed)
 
     def agreement() -> float:
@@ -132,8 +133,8 @@ def fit_policy(
         order = torch.randperm(len(act), generator=gen)
         bc_sum = vf_sum = 0.0
         for start in range(0, len(act), batch_size):
-            i = order[start : start + batch_size]
-            kw = {"action_masks": mask[i].numpy()} if masked else {}
+            i = order[start : start + batch_size].to(dev)
+            kw = {"action_masks": mask[i].cpu().numpy()} if masked else {}
             values, logp, _ = policy.evaluate_actions(obs[i], act[i], **kw)
             w = has_ret[i]
             v_loss = (w * (values.flatten() - ret[i]) ** 2).sum() / w.sum().clamp(min=1.0)

@@ -15,6 +15,17 @@ from torch import nn
 from cdr_bench.actions import N_ACTIONS
 from cdr_bench.rl import kernels
 
+COMPILED = True
+"""Use the compiled CPU kernels for CPU tensors (tests set it to False to run the tensor
+operations that every other device runs, on the CPU, and compare)."""
+
+
+def compiled(*tensors: torch.Tensor) -> bool:
+    """Whether the compiled kernels of :mod:`cdr_bench.rl.kernels` compute on ``tensors``: all
+    on the CPU (numba reads their memory) and :data:`COMPILED`. Else the same function in tensor
+    operations, on the tensors' device."""
+    return COMPILED and all(x.device.type == "cpu" for x in tensors)
+
 
 def sinusoidal_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
     """(N,) integer steps -> (N, dim) sinusoidal embedding (Vaswani et al. 2017)."""
@@ -48,6 +59,8 @@ class Mish(nn.Module):
     log1p and tanh per element, unvectorised on this CPU). float32."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not compiled(x):
+            return F.mish(x)
         if x.requires_grad and torch.is_grad_enabled():
             return _MishFunction.apply(x)
         xs = x.detach().contiguous().numpy().reshape(-1)
@@ -125,7 +138,7 @@ class Denoiser(nn.Module):
     def condition(self, h: torch.Tensor, max_t: int) -> Conditioning:
         """What :meth:`denoise` needs of the state embedding h (N, W) and of the steps
         0..``max_t``."""
-        te = self.t_mlp(sinusoidal_embedding(torch.arange(max_t + 1), self.width))
+        te = self.t_mlp(sinusoidal_embedding(torch.arange(max_t + 1, device=h.device), self.width))
         return Conditioning(h, self._qkv(h), te, self._qkv(te))
 
     def denoise(self, c: Conditioning, yt: torch.Tensor, t: torch.Tensor | int) -> torch.Tensor:
@@ -133,8 +146,13 @@ class Denoiser(nn.Module):
         r mod N: k passes in one) at steps t ((k N,) long, or one int for every row)."""
         n, n_states = yt.shape[0], c.h.shape[0]
         ye = self.y_mlp(yt)
-        t_idx = np.full(n, t, np.int64) if isinstance(t, int) else t.numpy()
-        h_idx = np.arange(n, dtype=np.int64) % n_states
+        t_idx: np.ndarray | torch.Tensor
+        if compiled(yt):
+            t_idx = np.full(n, t, np.int64) if isinstance(t, int) else t.numpy()
+            h_idx: np.ndarray | torch.Tensor = np.arange(n, dtype=np.int64) % n_states
+        else:  # the indices stay on the device
+            t_idx = torch.full((n,), t, device=yt.device) if isinstance(t, int) else t
+            h_idx = torch.arange(n, device=yt.device) % n_states
         mixed = three_token_attention(
             c.qkv_h, h_idx, c.qkv_t, t_idx, self._qkv(ye), self.attn.num_heads
         )
@@ -193,15 +211,19 @@ class ThreeTokenAttention(torch.autograd.Function):
 
 def three_token_attention(
     qkv0: torch.Tensor,
-    idx0: np.ndarray,
+    idx0: np.ndarray | torch.Tensor,
     qkv1: torch.Tensor,
-    idx1: np.ndarray,
+    idx1: np.ndarray | torch.Tensor,
     qkv2: torch.Tensor,
     heads: int,
 ) -> torch.Tensor:
     """:class:`ThreeTokenAttention`, without recording the backward pass when no gradient is
-    wanted (acting)."""
+    wanted (acting); off the CPU (indices as tensors) :func:`attention_tensors`."""
     tables = (qkv0, qkv1, qkv2)
+    if isinstance(idx0, torch.Tensor) or isinstance(idx1, torch.Tensor):
+        return attention_tensors(
+            qkv0, torch.as_tensor(idx0), qkv1, torch.as_tensor(idx1), qkv2, heads
+        )
     if torch.is_grad_enabled() and any(x.requires_grad for x in tables):
         return ThreeTokenAttention.apply(qkv0, idx0, qkv1, idx1, qkv2, heads)
     q0, q1, q2 = (x.detach().contiguous().numpy() for x in tables)
@@ -209,6 +231,26 @@ def three_token_attention(
     attn = np.empty((q2.shape[0], heads, 3, 3), np.float32)
     kernels.attention_forward(q0, idx0, q1, idx1, q2, heads, out, attn)
     return torch.from_numpy(out)
+
+
+def attention_tensors(
+    qkv0: torch.Tensor,
+    idx0: torch.Tensor,
+    qkv1: torch.Tensor,
+    idx1: torch.Tensor,
+    qkv2: torch.Tensor,
+    heads: int,
+) -> torch.Tensor:
+    """:class:`ThreeTokenAttention` in tensor operations (any device; autograd gives the
+    backward pass): per row and head, softmax(q_i k_j / sqrt(d)) over the three tokens j,
+    summed over the three queries i, times the values; (N, W)."""
+    rows = torch.stack([qkv0[idx0], qkv1[idx1], qkv2], dim=1)  # (N, 3 tokens, 3 W)
+    n, w = rows.shape[0], rows.shape[2] // 3
+    d = w // heads
+    q, k, v = rows.view(n, 3, 3, heads, d).unbind(2)  # each (N, token, head, d)
+    scores = torch.einsum("nihe,njhe->nhij", q, k) * (1.0 / math.sqrt(d))
+    weight = torch.softmax(scores, dim=-1).sum(dim=2)  # (N, head, token j)
+    return torch.einsum("nhj,njhe->nhe", weight, v).reshape(n, w)
 
 
 def mlp(inp: int, width: int, out: int, layers: int = 3) -> nn.Sequential:
@@ -356,7 +398,7 @@ class FusedAdam(torch.optim.Adam):
         p = params[0]
         state = self.state[p]
         if not state:
-            state["step"] = torch.zeros((), dtype=torch.float32)
+            state["step"] = torch.zeros((), dtype=torch.float32, device=p.device)
             state["exp_avg"] = torch.zeros_like(p, memory_format=torch.preserve_format)
             state["exp_avg_sq"] = torch.zeros_like(p, memory_format=torch.preserve_format)
         state["step"].add_(1)
@@ -380,7 +422,7 @@ class FusedAdam(torch.optim.Adam):
 
 
 def adam(params: Any, **kw: Any) -> torch.optim.Adam:
-    """Adam with the fused CPU kernel (one call per step for all parameters instead of a
+    """Adam with the fused kernel (CPU or CUDA) (one call per step for all parameters instead of a
     dozen small operations per parameter tensor; the same update rule)."""
     return FusedAdam(params, fused=True, **kw)
 

@@ -122,8 +122,9 @@ class OffPolicyAlgorithm:
     """title of the learning curve"""
     args: type[OffPolicyArgs]
     """its flags"""
-    build: Callable[[Any, int, np.random.Generator], Learner]
-    """(args, observation size, the loop's numpy generator) -> the learner"""
+    build: Callable[..., Learner]
+    """(args, observation size, the loop's numpy generator, device=torch.device) -> the
+    learner, its networks on that device"""
     replay: Callable[[Any], ReplayConfig] = lambda args: ReplayConfig()
     """how its transitions are stored and drawn"""
 
@@ -182,12 +183,24 @@ def collect(
     return st, int(acting.sum())
 
 
+def on_cpu(state: dict[str, Any]) -> dict[str, Any]:
+    """A state dict whose tensors are all on the CPU (what a checkpoint holds, whatever device
+    trained it): ``state`` itself when they already are."""
+    if all(v.device.type == "cpu" for v in state.values()):
+        return state
+    return {k: v.cpu() for k, v in state.items()}
+
+
 def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
     """Train, write ``args.run_dir``, return the summary (also its ``final`` log line)."""
     import torch
 
+    from cdr_bench.rl.device import resolve_device
+
     if args.stop_at < 0:
         raise ValueError(f"--stop-at must be 0 (no pause) or a transition count: {args.stop_at}")
+    device = resolve_device(args.device)
+    cuda = device.type == "cuda"
     torch.set_num_threads(args.threads)
 
     # Seeding.
@@ -196,7 +209,7 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
 
     # Environment, learner, replay.
     env = training_env(args)
-    learner = algorithm.build(args, env.observation_size, rng)
+    learner = algorithm.build(args, env.observation_size, rng, device=device)
     n_slots = env.num_envs * env.n_agents
     replay = Replay(
         algorithm.replay(args), args.buffer_size, env.observation_size, n_slots, args.gamma
@@ -214,6 +227,8 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
         loop = Counters(**saved["loop"])
         rng.bit_generator.state = saved["rng"]  # in place: the learner may hold this generator
         torch.set_rng_state(saved["torch_rng"])
+        if cuda and "cuda_rng" in saved:
+            torch.cuda.set_rng_state(saved["cuda_rng"], device)
     log = RunLog(args, algorithm.name, saved["log"])
 
     def save() -> None:
@@ -226,6 +241,7 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
             "log": log.state_dict(loop.step),
             "rng": rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
+            **({"cuda_rng": torch.cuda.get_rng_state(device)} if cuda else {}),
         }
         torch.save(state, state_path + ".tmp")
         os.replace(state_path + ".tmp", state_path)
@@ -239,7 +255,7 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
         checkpoint = {
             **learner.checkpoint_extra,
             "config": learner.config,
-            "state_dict": learner.actor.state_dict(),
+            "state_dict": on_cpu(learner.actor.state_dict()),
         }
         torch.save({**checkpoint, "meta": meta}, os.path.join(args.run_dir, "checkpoint.pt"))
 
@@ -263,7 +279,8 @@ def train(algorithm: OffPolicyAlgorithm, args: OffPolicyArgs) -> dict:
             while loop.credit >= 1.0:
                 loop.credit -= 1.0
                 batch = replay.sample(args.batch_size, rng, loop.beta)
-                losses = learner.update({k: torch.from_numpy(v) for k, v in batch.items()})
+                on_device = {k: torch.from_numpy(v).to(device) for k, v in batch.items()}
+                losses = learner.update(on_device)
                 for k, v in losses.items():
                     loop.losses.setdefault(k, []).append(v)
                 if replay.prioritized:

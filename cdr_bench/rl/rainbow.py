@@ -40,6 +40,7 @@ from cdr_bench.rl.networks import (
     FlatParameters,
     LearnerParts,
     adam,
+    compiled,
     frozen_copy,
     polyak_update,
 )
@@ -78,8 +79,9 @@ class NoisyLinear(nn.Module):
 
     @torch.no_grad()
     def reset_noise(self, generator: torch.Generator | None = None) -> None:
-        eps_in = self.scale_noise(torch.randn(self.in_features, generator=generator))
-        eps_out = self.scale_noise(torch.randn(self.out_features, generator=generator))
+        dev = self.weight_mu.device
+        eps_in = self.scale_noise(torch.randn(self.in_features, generator=generator, device=dev))
+        eps_out = self.scale_noise(torch.randn(self.out_features, generator=generator, device=dev))
         self.set_noise(eps_in, eps_out)
 
     def set_noise(self, eps_in: torch.Tensor, eps_out: torch.Tensor) -> None:
@@ -133,8 +135,11 @@ def project_distribution(
     (discount = gamma^n (1 - done)). Each shifted atom Tz_j = clip(r + discount z_j) lands at
     b = (Tz_j - v_min) / dz and splits its mass between atoms floor(b) and ceil(b) in proportion
     to closeness (all of it to b when b is an integer). Returns (N, K), rows summing to 1
-    (float32, no gradient; one compiled loop, :func:`cdr_bench.rl.kernels.c51_projection`).
+    (float32, no gradient; on the CPU one compiled loop,
+    :func:`cdr_bench.rl.kernels.c51_projection`, elsewhere :func:`project_tensors`).
     """
+    if not compiled(probs, reward, discount, support):
+        return project_tensors(probs, reward, discount, support)
     p, r, d, z = (
         x.detach().contiguous().to(torch.float32).numpy()
         for x in (probs, reward, discount, support)
@@ -142,6 +147,25 @@ def project_distribution(
     out = np.empty(p.shape, np.float32)
     kernels.c51_projection(p, r, d, z, out)
     return torch.from_numpy(out)
+
+
+@torch.no_grad()
+def project_tensors(
+    probs: torch.Tensor, reward: torch.Tensor, discount: torch.Tensor, support: torch.Tensor
+) -> torch.Tensor:
+    """:func:`project_distribution` in tensor operations (any device)."""
+    probs = probs.detach().to(torch.float32)
+    k = support.shape[0]
+    v_min, v_max = support[0], support[k - 1]
+    dz = ((v_max.double() - v_min.double()) / (k - 1)).float()
+    tz = (reward[:, None] + discount[:, None] * support[None, :]).clamp(v_min, v_max)
+    b = (tz - v_min) / dz
+    lo, hi = b.floor(), b.ceil()
+    same = (lo == hi).to(probs.dtype)
+    out = torch.zeros_like(probs)
+    out.scatter_add_(1, lo.long(), probs * (hi - b + same))
+    out.scatter_add_(1, hi.long(), probs * (b - lo))
+    return out
 
 
 @dataclass
@@ -218,7 +242,8 @@ class RainbowNet(nn.Module):
         seq = (self.value[0], self.value[2], self.advantage[0], self.advantage[2])
         layers = cast(list[NoisyLinear], list(seq))
         sizes = [n for m in layers for n in (m.in_features, m.out_features)]
-        f = NoisyLinear.scale_noise(torch.randn(sum(sizes), generator=generator)).split(sizes)
+        draw = torch.randn(sum(sizes), generator=generator, device=self.support.device)
+        f = NoisyLinear.scale_noise(draw).split(sizes)
         for i, m in enumerate(layers):
             m.set_noise(f[2 * i], f[2 * i + 1])
 
@@ -241,6 +266,10 @@ class RainbowNet(nn.Module):
         v = self.value(h)
         hidden = self.advantage[1](self.advantage[0](h))
         out: NoisyLinear = self.advantage[2]  # type: ignore[assignment]
+        if not compiled(hidden):  # the full layer, then the taken actions' rows
+            full = out(hidden).view(-1, N_ACTIONS, self.cfg.n_atoms)
+            rows = torch.arange(full.shape[0], device=full.device)
+            return F.log_softmax(v + full[rows, actions] - full.mean(dim=1), dim=-1)
         eps_in, eps_out = out.noise()
         d = NoisyHead.apply(
             hidden, out.weight_mu, out.weight_sigma, out.bias_mu, out.bias_sigma,
@@ -257,7 +286,9 @@ class RainbowNet(nn.Module):
         """:meth:`q_values` (the same function, to float rounding), without gradients and
         faster: the advantage's noisy output layer formed in one pass, its product without the
         bias, then aggregation, softmax over atoms and expectation in one compiled pass per
-        state (:func:`cdr_bench.rl.kernels.dueling_expected_q`)."""
+        state (:func:`cdr_bench.rl.kernels.dueling_expected_q`); off the CPU :meth:`q_values`."""
+        if not compiled(obs):
+            return self.q_values(obs)
         h = self.torso(obs)
         v = self.value(h)
         hidden = self.advantage[1](self.advantage[0](h))
@@ -287,10 +318,16 @@ class Rainbow(LearnerParts):
     PARTS = ("net", "target", "opt")
 
     def __init__(
-        self, cfg: RainbowConfig, lr: float = 1e-4, adam_eps: float = 1.5e-4, polyak: float = 5e-3
+        self,
+        cfg: RainbowConfig,
+        lr: float = 1e-4,
+        adam_eps: float = 1.5e-4,
+        polyak: float = 5e-3,
+        device: str | torch.device = "cpu",
     ):
         self.cfg, self.polyak = cfg, polyak
-        self.net = RainbowNet(cfg)
+        self.device = torch.device(device)
+        self.net = RainbowNet(cfg).to(self.device)  # built on the CPU: the same initial weights
         self.target: RainbowNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.flat = FlatParameters(self.net)  # after the target's copy
         self.opt = adam([self.flat.flat], lr=lr, eps=adam_eps)
@@ -304,8 +341,8 @@ class Rainbow(LearnerParts):
         if explore:
             self.net.reset_noise()
         with torch.inference_mode():
-            q = self.net.expected_q(torch.from_numpy(obs))
-            return masked_argmax(q, torch.from_numpy(mask)).numpy()
+            q = self.net.expected_q(torch.from_numpy(obs).to(self.device))
+            return masked_argmax(q, torch.from_numpy(mask).to(self.device)).cpu().numpy()
 
     @torch.no_grad()
     def target_distribution(
@@ -337,7 +374,7 @@ class Rainbow(LearnerParts):
         self.flat.clip_grad_norm(10.0)
         self.opt.step()
         polyak_update(self.target, self.net, self.polyak)
-        self.priorities = ce.detach().numpy()
+        self.priorities = ce.detach().cpu().numpy()
         return {"loss_ce": float(loss.item())}
 
 

@@ -139,12 +139,14 @@ class SafeDQN(LearnerParts):
         epsilon: Callable[[int], float] | None = None,
         rng: np.random.Generator | None = None,
         base_steps: list[dict[str, Any]] | None = None,
+        device: str | torch.device = "cpu",
     ):
         if base_steps and cfg.rule != "mvp-improve":
             raise ValueError("earlier improvement steps (base_steps) need the mvp-improve rule")
         self.base_steps = list(base_steps or [])
         self._base = [SafeDQNQ.from_step(b) for b in self.base_steps]
-        self.net = SafeDQNNet(cfg)
+        self.device = torch.device(device)
+        self.net = SafeDQNNet(cfg).to(self.device)  # built on the CPU: the same initial weights
         self.target: SafeDQNNet = frozen_copy(self.net)  # type: ignore[assignment]
         self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
         self.cfg, self.gamma, self.polyak = cfg, gamma, polyak
@@ -171,11 +173,11 @@ class SafeDQN(LearnerParts):
             if explore:  # the behaviour is the base policy (with epsilon-random actions below)
                 actions = base
             else:
-                base_t = torch.from_numpy(base)
-                chosen = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask), base_t)
-                actions = chosen.numpy()
+                o, m, base_t = (torch.from_numpy(x).to(self.device) for x in (obs, mask, base))
+                actions = self.net.act(o, m, base_t).cpu().numpy()
         else:
-            actions = self.net.act(torch.from_numpy(obs), torch.from_numpy(mask)).numpy()
+            o, m = (torch.from_numpy(x).to(self.device) for x in (obs, mask))
+            actions = self.net.act(o, m).cpu().numpy()
         if explore and self.epsilon_schedule is not None:
             assert self.rng is not None
             rows = self.rng.random(len(actions)) < self.epsilon
@@ -192,13 +194,13 @@ class SafeDQN(LearnerParts):
         action, mvp's or the earlier steps', so the networks evaluate that policy)."""
         if self.cfg.rule == "mvp-improve":
             a_star = torch.from_numpy(
-                self.base_actions(b["next_obs"].numpy(), b["next_mask"].numpy())
-            )
+                self.base_actions(b["next_obs"].cpu().numpy(), b["next_mask"].cpu().numpy())
+            ).to(self.device)
         else:
             qs_on, qg_on = self.net(b["next_obs"])
             a_star = combine(qs_on, qg_on, b["next_mask"], self.cfg.rule, self.cfg.slack)
         qs_t, qg_t = self.target(b["next_obs"])
-        idx = torch.arange(len(a_star))
+        idx = torch.arange(len(a_star), device=a_star.device)
         cont = self.gamma * (1.0 - b["done"])
         return (
             b["safety_reward"] + cont * qs_t[idx, a_star],
@@ -208,7 +210,7 @@ class SafeDQN(LearnerParts):
     def update(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
         y_s, y_g = self.targets(b)
         qs, qg = self.net(b["obs"])
-        idx = torch.arange(len(b["action"]))
+        idx = torch.arange(len(b["action"]), device=b["action"].device)
         loss_s = F.smooth_l1_loss(qs[idx, b["action"]], y_s)
         loss_g = F.smooth_l1_loss(qg[idx, b["action"]], y_g)
         self.opt.zero_grad()

@@ -68,12 +68,12 @@ def actor_state(model: Any, kind: str) -> tuple[dict, dict[str, torch.Tensor]]:
         linears = [m for m in pol.mlp_extractor.policy_net if isinstance(m, nn.Linear)]
         linears.append(pol.action_net)
         for i, lin in enumerate(linears):
-            sd[f"{2 * i}.weight"] = lin.weight.detach().clone()
-            sd[f"{2 * i}.bias"] = lin.bias.detach().clone()
+            sd[f"{2 * i}.weight"] = lin.weight.detach().cpu().clone()
+            sd[f"{2 * i}.bias"] = lin.bias.detach().cpu().clone()
         layers = len(linears) - 1
         width = int(linears[0].out_features)
     elif kind == "td3":
-        sd = {k: v.detach().clone() for k, v in model.actor.mu.state_dict().items()}
+        sd = {k: v.detach().cpu().clone() for k, v in model.actor.mu.state_dict().items()}
         mu_linears = [m for m in model.actor.mu if isinstance(m, nn.Linear)]
         layers, width = len(mu_linears) - 1, int(mu_linears[0].out_features)
     else:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -109,7 +109,9 @@ def teacher_tau(args: Args, stage: int | None) -> float:
     return args.tau_start * (args.tau_end / args.tau_start) ** frac
 
 
-def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> DiffusionAC:
+def build(
+    args: Args, obs_dim: int, rng: np.random.Generator | None = None, device: Any = "cpu"
+) -> DiffusionAC:
     from cdr_bench.rl.diffusion_ac import DiffusionAC, PolicyConfig, UpdateConfig
 
     actor = "categorical" if args.ablation == "no-diffusion" else "diffusion"
@@ -117,7 +119,7 @@ def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> D
     pcfg = PolicyConfig(**same_named(args, PolicyConfig, obs_dim=obs_dim, actor=actor, twin=twin))
     ucfg = UpdateConfig(**same_named(args, UpdateConfig))
     tau = functools.partial(teacher_tau, args)
-    return DiffusionAC(pcfg, ucfg, seed=args.seed, explore=args.explore, tau=tau)
+    return DiffusionAC(pcfg, ucfg, seed=args.seed, explore=args.explore, tau=tau, device=device)
 
 
 ALGORITHM = OffPolicyAlgorithm("diffusion-ac", "Diffusion-AC", Args, build)

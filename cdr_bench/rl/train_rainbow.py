@@ -10,7 +10,7 @@ n-step replay; the noisy nets explore. ``checkpoint.pt`` is loaded by agents/rai
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,11 +51,13 @@ class Args(OffPolicyArgs):
             raise ValueError(f"--v-min {self.v_min:g} must be below --v-max {self.v_max:g}")
 
 
-def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> Rainbow:
+def build(
+    args: Args, obs_dim: int, rng: np.random.Generator | None = None, device: Any = "cpu"
+) -> Rainbow:
     from cdr_bench.rl.rainbow import Rainbow, RainbowConfig
 
     cfg = RainbowConfig(**same_named(args, RainbowConfig, obs_dim=obs_dim))
-    return Rainbow(cfg, **same_named(args, ("lr", "polyak")))
+    return Rainbow(cfg, **same_named(args, ("lr", "polyak")), device=device)
 
 
 def replay(args: Args) -> ReplayConfig:

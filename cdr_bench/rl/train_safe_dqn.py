@@ -104,7 +104,9 @@ def base_steps(path: str, obs_dim: int) -> list[dict[str, Any]]:
     return steps
 
 
-def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> SafeDQN:
+def build(
+    args: Args, obs_dim: int, rng: np.random.Generator | None = None, device: Any = "cpu"
+) -> SafeDQN:
     from cdr_bench.rl.safe_dqn import SafeDQN, SafeDQNConfig
 
     epsilon = functools.partial(
@@ -115,6 +117,7 @@ def build(args: Args, obs_dim: int, rng: np.random.Generator | None = None) -> S
     return SafeDQN(
         cfg,
         **same_named(args, ("lr", "gamma", "polyak"), epsilon=epsilon, rng=rng, base_steps=base),
+        device=device,
     )
 
 

@@ -105,9 +105,9 @@ def _algorithm_class(algorithm: str) -> Any:
     raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
 
 
-def _new_model(algorithm: str, args: Args, venv: Any) -> Any:
+def _new_model(algorithm: str, args: Args, venv: Any, device: Any = "cpu") -> Any:
     cls = _algorithm_class(algorithm)
-    common = dict(gamma=args.gamma, learning_rate=args.lr, seed=args.seed, device="cpu", verbose=0)
+    common = dict(gamma=args.gamma, learning_rate=args.lr, seed=args.seed, device=device, verbose=0)
     if algorithm in ("ppo", "maskable-ppo"):
         arch = dict(pi=[args.width] * 3, vf=[args.width] * 3)
         ppo = same_named(args, ("n_steps", "n_epochs", "clip_range", "gae_lambda", "ent_coef"))
@@ -129,10 +129,12 @@ def train(algorithm: str, args: Args) -> dict:
 
     from cdr_bench.resolvers import mvp_onehot, with_mvp_input
     from cdr_bench.rl.baselines import continuous_to_index
+    from cdr_bench.rl.device import resolve_device
     from cdr_bench.rl.sb3_policies import actor_of, export_actor
     from cdr_bench.wrappers import vector_env_to_sb3
 
     cls = _algorithm_class(algorithm)
+    device = resolve_device(args.device)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
 
@@ -152,7 +154,7 @@ def train(algorithm: str, args: Args) -> dict:
         saved = torch.load(state_path, map_location="cpu", weights_only=False)
         env.load_state_dict(saved["env"])
         # load() re-seeds every generator (restored below) and must not restart the episodes.
-        model = cls.load(zip_path, env=venv, device="cpu", force_reset=False)
+        model = cls.load(zip_path, env=venv, device=device, force_reset=False)
         venv.load_state_dict(saved["venv"])
         venv.seed(None)
         if td3:
@@ -161,7 +163,7 @@ def train(algorithm: str, args: Args) -> dict:
         torch.set_rng_state(saved["torch_rng"])
         model.action_space.np_random.bit_generator.state = saved["action_space_rng"]
     else:
-        model = _new_model(algorithm, args, venv)
+        model = _new_model(algorithm, args, venv, device)
     # an in-memory logger (read by read_losses): SB3's default leaves an empty /tmp/SB3-<time>
     # folder behind every run
     from stable_baselines3.common.logger import Logger
