@@ -83,3 +83,14 @@ def test_tiny_run_and_shipped_agent(tmp_path, monkeypatch, name):
     other = agent_module("mappo" if name == "ippo" else "ippo")
     with pytest.raises(ValueError, match="not a"):
         other.Agent(None, None)
+
+
+@pytest.mark.slow
+def test_same_seed_same_weights(tmp_path):
+    """A run is fixed by its seed (one torch thread): the recipe's seeds can be retrained."""
+    flags = ["--total-steps", "2000", "--n-envs", "2", "--n-steps", "8", "--width", "16"]
+    for d in ("a", "b"):
+        r = cdr_bench("train", "mappo", "--run-dir", str(tmp_path / d), "--seed", "5", *flags)
+        assert r.returncode == 0, r.stderr
+    a, b = (torch.load(tmp_path / d / "checkpoint.pt", weights_only=True) for d in ("a", "b"))
+    assert all(torch.equal(a["state_dict"][k], b["state_dict"][k]) for k in a["state_dict"])
