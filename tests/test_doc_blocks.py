@@ -388,6 +388,28 @@ def check_rllib_tutorial(out: str, cwd: Path) -> None:
     assert all(sum(c.values()) == 2 for c in summary["outcomes"].values())
 
 
+@_needs_modules("torch")
+def check_shared_policy_tutorial(out: str, cwd: Path) -> None:
+    import torch
+
+    decoder = json.JSONDecoder()
+    runs = [decoder.raw_decode(out, m.start())[0] for m in re.finditer(r"^\{$", out, re.M)]
+    assert [r["algorithm"] for r in runs] == ["ippo", "mappo"]
+    for run in runs:
+        assert run["steps"] >= 20_000 and run["updates"] >= 1, run
+        ck = torch.load(
+            cwd / "runs" / f"{run['algorithm']}-tiny" / "checkpoint.pt", weights_only=True
+        )
+        assert ck["config"]["algorithm"] == run["algorithm"]
+        assert ck["state_dict"]["4.weight"].shape == (27, 64)
+    # the system table of both evaluations: the same 10 episodes, 49 flights each
+    rows = [ln.split() for ln in out.splitlines() if ln.startswith("marl/high-all")]
+    system = [r for r in rows if r[1] == "10"]  # scenario, episodes, flights, ...
+    assert len(system) == 2 and all(r[2] == "490" for r in system), rows
+    for path in ("results/mappo-tiny/high-all.json", "results/mvp/high-all.json"):
+        assert (cwd / path).is_file()
+
+
 def check_template(out: str, cwd: Path) -> None:
     assert (cwd / "results" / "template" / "medium.json").is_file()
 
@@ -400,6 +422,7 @@ CHECKS: dict[str, Callable[[str, Path], None]] = {
     "python docs/tutorials/ppo_vector_env.py --total-timesteps": check_ppo_tutorial,
     "python docs/tutorials/rllib_ppo.py --iterations": check_rllib_tutorial,
     "cdr-bench evaluate agents/template/agent.py": check_template,
+    "cdr-bench train ippo --scenario marl/high-all": check_shared_policy_tutorial,
 }
 """Commands whose output is checked beyond their exit status (key: a part of the block)."""
 

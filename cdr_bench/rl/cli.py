@@ -21,6 +21,8 @@ TRAINERS: dict[str, str] = {
     "td3": "cdr_bench.rl.train_sb3",
     "rainbow": "cdr_bench.rl.train_rainbow",
     "safe-dqn-x": "cdr_bench.rl.train_safe_dqn",
+    "ippo": "cdr_bench.rl.mappo",
+    "mappo": "cdr_bench.rl.mappo",
 }
 """``cdr-bench train NAME``: trainer modules (one module may train several NAMEs). Each exposes
 ``add_arguments(parser, name=None)`` (its flags; with ``name``, the parsed namespace's

@@ -147,9 +147,9 @@ FLAG_RANGES: dict[str, tuple[float, float, bool]] = {
         n: (1, _INF, True)
         for n in (
             "T", "batch_size", "buffer_size", "checkpoint_every", "critic_width",
-            "curve_episodes", "log_every", "n_atoms", "n_blocks", "n_envs", "n_epochs", "n_step",
-            "n_steps", "ppo_batch_size", "threads", "total_steps", "update_every", "width",
-            "window",
+            "curve_episodes", "layers", "log_every", "minibatches", "n_atoms", "n_blocks",
+            "n_envs", "n_epochs", "n_step", "n_steps", "ppo_batch_size", "threads",
+            "total_steps", "update_every", "width", "window",
         )
     },
     # whole numbers >= 0 (0 = off, none or the scenario's own)
@@ -169,13 +169,16 @@ FLAG_RANGES: dict[str, tuple[float, float, bool]] = {
         )
     },
     # step sizes and temperatures: > 0
-    **{n: (0, _INF, False) for n in ("lr", "lr_actor", "lr_critic", "tau_start", "tau_end")},
+    **{
+        n: (0, _INF, False)
+        for n in ("lr", "lr_actor", "lr_critic", "max_grad_norm", "tau_start", "tau_end")
+    },
     # weights, penalties, noise scales, margins and limits: >= 0
     **{
         n: (0, _INF, True)
         for n in (
-            "action_noise", "ce_weight", "clip_range", "ent_coef", "failure_penalty",
-            "los_penalty", "max_wall_minutes", "sigma0", "slack",
+            "action_noise", "ce_weight", "clip_range", "ent_coef", "failure_penalty", "hold_bias",
+            "los_penalty", "max_wall_minutes", "sigma0", "slack", "vf_coef",
         )
     },
     # any number (v_min < v_max is checked with the other fields); q_target_max may be inf

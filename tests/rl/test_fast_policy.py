@@ -260,7 +260,9 @@ def _load(path: Path):
 
 
 @pytest.mark.artefacts
-@pytest.mark.parametrize("name", ["ppo", "maskable_ppo", "td3", "rainbow", "safe_dqn_x"])
+@pytest.mark.parametrize(
+    "name", ["ppo", "maskable_ppo", "td3", "rainbow", "safe_dqn_x", "ippo", "mappo"]
+)
 def test_shipped_baselines_same_actions_on_simulator_states(name):
     from cdr_bench.rl import rainbow, safe_dqn
     from cdr_bench.rl.baselines import continuous_to_index
@@ -292,7 +294,7 @@ def test_shipped_baselines_same_actions_on_simulator_states(name):
             if name == "td3":
                 ref_a, got_a = continuous_to_index(ref), continuous_to_index(got)
             else:
-                use = mask if name == "maskable_ppo" else None
+                use = mask if name != "ppo" else None
                 ref_a = (
                     np.where(mask != 0, ref, -np.inf).argmax(1)
                     if use is not None
