@@ -713,6 +713,11 @@ def step_episodes(actions, s, c, o):
             occ[m] = ((1 << s.level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
         n_sky = _slots_in_sky(e, s, in_sky)
         one = M == 1
+        n_bg = B  # the background slots in ``in_sky[:n_bg]``, the controlled ones after them
+        if not one:
+            n_bg = 0
+            while n_bg < n_sky and in_sky[n_bg] < B:
+                n_bg += 1
         for m in range(M):
             n_los[m] = 0
             n_nmac[m] = 0
@@ -726,11 +731,8 @@ def step_episodes(actions, s, c, o):
             best = o.min_sep[e, m]  # locals, not array elements: kept in registers
             n_l = 0
             n_n = 0
-            j = 0
-            n_bg = B if one else n_sky
-            while j < n_bg and (one or in_sky[j] < B):  # the background (first in ``in_sky``)
+            for j in range(n_bg):  # the background (first in ``in_sky``)
                 n = j if one else in_sky[j]  # ``one``: no list, every slot (_slots_in_sky)
-                j += 1
                 if not s.active[e, n] or occ_m & (1 << s.level[e, n]) == 0:
                     continue
                 d, _ = closest_approach(
@@ -752,7 +754,7 @@ def step_episodes(actions, s, c, o):
             # from its lower index. The distance is the same bits from either side (a - b =
             # -(b - a) exactly, and every later operation is odd or even in it), and the
             # minimum and the counts do not depend on the order in which pairs are judged.
-            for jj in range(j, n_sky):
+            for jj in range(n_bg, n_sky):
                 n = in_sky[jj]
                 if n <= i or not s.active[e, n]:
                     continue
