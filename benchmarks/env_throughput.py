@@ -78,7 +78,7 @@ def _worker(args: argparse.Namespace) -> None:
         return steps * n / (time.perf_counter() - t0)
 
     pettingzoo(200)  # warm-up: compiled code loaded, caches filled
-    batched(5, args.batch)
+    batched(60, args.batch)  # 60 steps: episodes end, so the restart path is loaded too
     out = {
         "pettingzoo_steps_per_s": pettingzoo(args.steps),
         "batched_episode_steps_per_s": batched(args.batched_steps, args.batch),

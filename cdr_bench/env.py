@@ -40,6 +40,36 @@ every value a number (``outcome``: 0 while flying, else the code of ``cdr_bench.
 ``OUTCOME_NAMES``; ``los_count`` / ``nmac_count``: how many aircraft, instead of their ids)."""
 
 
+class _ActionSpace(spaces.Discrete):
+    """``Discrete(27)`` whose ``sample(mask)`` has a short path for the three masks the env
+    gives (no descent, all, no climb): gymnasium's ``Discrete.sample`` checks the mask (five
+    numpy reductions) and draws ``start + np_random.choice(np.where(mask == 1)[0])``; here the
+    feasible indices are looked up by the mask's bytes and the same draw is made as
+    ``feasible[np_random.integers(0, len(feasible))]``, which is what ``Generator.choice`` of
+    a 1-d array does without ``p``: the same samples and the same stream as
+    ``spaces.Discrete(27)`` (``tests/env/test_pettingzoo.py`` checks it). Any other mask or
+    argument goes to gymnasium's own ``sample``. Most of the README's random loop at ~50
+    agents was these checks and ``choice``'s own."""
+
+    def sample(self, mask: Any = None, probability: Any = None) -> Any:
+        if probability is None and type(mask) is np.ndarray and mask.dtype == np.int8:
+            feasible = _FEASIBLE.get(mask.tobytes()) if mask.shape == (N_ACTIONS,) else None
+            if feasible is not None and self.n == N_ACTIONS:
+                return self.start + feasible[self.np_random.integers(0, feasible.shape[0])]
+        return super().sample(mask, probability)
+
+
+def _feasible_by_mask() -> dict[bytes, NDArray[np.int64]]:
+    out = {}
+    for level in range(3):
+        mask = np.array([0 <= level + a % 3 - 1 < 3 for a in range(N_ACTIONS)], dtype=np.int8)
+        out[mask.tobytes()] = np.where(mask == 1)[0]
+    return out
+
+
+_FEASIBLE = _feasible_by_mask()
+
+
 def _flat(info: dict[str, Any], terms: list[float], outcome: int, seed: int) -> dict[str, Any]:
     flat: dict[str, Any] = {f"reward_{t}": v for t, v in zip(REWARD_TERMS, terms, strict=True)}
     flat["goal_reward"] = info["goal_reward"]
@@ -266,7 +296,7 @@ class CDREnv(ParallelEnv):
             )
             for a in self.possible_agents
         }
-        self.action_spaces = {a: spaces.Discrete(N_ACTIONS) for a in self.possible_agents}
+        self.action_spaces = {a: _ActionSpace(N_ACTIONS) for a in self.possible_agents}
         sim = self.vector.sim
         B, M = sim.B, sim.M
         big = np.float32(1e4)
@@ -452,8 +482,10 @@ def check_action(agent: str, value: Any) -> int:
     """The action of ``agent`` as an int in 0..26: a Python or numpy integer or a 0-d integer
     array. Anything else raises :class:`~cdr_bench.errors.ActionError` naming the agent and the
     value. The one check of a single action (the Gymnasium ``Ownship-v0`` steps through it)."""
-    if type(value) is int and 0 <= value < N_ACTIONS:  # the common case, checked first
+    if type(value) is int and 0 <= value < N_ACTIONS:  # the common cases, checked first
         return value
+    if type(value) is np.int64 and 0 <= value < N_ACTIONS:  # what ``action_space.sample`` gives
+        return int(value)
     v = value
     if isinstance(v, np.ndarray):
         if v.ndim != 0:

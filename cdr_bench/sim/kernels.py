@@ -667,6 +667,7 @@ def step_episodes(actions, s, c, o):
     row = np.zeros(o.obs.shape[2])
     best_d = np.empty(max((o.obs.shape[2] - 12) // 10, 1))
     best_n = np.empty(best_d.shape[0], dtype=np.int64)
+    in_sky = np.arange(N)  # scratch: the slots in the sky, ascending (see _slots_in_sky)
     n_done = 0
     for e in range(E):
         live = False
@@ -677,7 +678,7 @@ def step_episodes(actions, s, c, o):
             o.min_sep[e, m] = np.inf
             new_level[m] = s.level[e, B + m]
         if not live:
-            _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n)
+            _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n, in_sky)
             continue
 
         # 1. Apply the actions at the start of the step: turn, clipped speed, target level.
@@ -710,23 +711,29 @@ def step_episodes(actions, s, c, o):
         #    occupies the old and the new level for the step.
         for m in range(M):
             occ[m] = ((1 << s.level[e, B + m]) | (1 << new_level[m])) if acting[m] else 0
+        n_sky = _slots_in_sky(e, s, in_sky)
+        one = M == 1
+        n_bg = B  # the background slots in ``in_sky[:n_bg]``, the controlled ones after them
+        if not one:
+            n_bg = 0
+            while n_bg < n_sky and in_sky[n_bg] < B:
+                n_bg += 1
         for m in range(M):
             n_los[m] = 0
             n_nmac[m] = 0
+        for m in range(M):
             if not acting[m]:
                 continue
             i = B + m
             occ_m = occ[m]
             px, py = s.pos[e, i, 0], s.pos[e, i, 1]
             vx, vy = s.vel[e, i, 0], s.vel[e, i, 1]
-            best = np.inf  # locals, not array elements: kept in registers
+            best = o.min_sep[e, m]  # locals, not array elements: kept in registers
             n_l = 0
             n_n = 0
-            for n in range(N):
-                if n == i or not s.active[e, n]:
-                    continue
-                occ_n = (1 << s.level[e, n]) if n < B else occ[n - B]
-                if occ_m & occ_n == 0:
+            for j in range(n_bg):  # the background (first in ``in_sky``)
+                n = j if one else in_sky[j]  # ``one``: no list, every slot (_slots_in_sky)
+                if not s.active[e, n] or occ_m & (1 << s.level[e, n]) == 0:
                     continue
                 d, _ = closest_approach(
                     s.pos[e, n, 0] - px,
@@ -743,9 +750,41 @@ def step_episodes(actions, s, c, o):
                     if d < nmac_km:
                         o.events[1, e, m, n] = True
                         n_n += 1
+            # The controlled aircraft above m: a pair of controlled aircraft is judged once,
+            # from its lower index. The distance is the same bits from either side (a - b =
+            # -(b - a) exactly, and every later operation is odd or even in it), and the
+            # minimum and the counts do not depend on the order in which pairs are judged.
+            for jj in range(n_bg, n_sky):
+                n = in_sky[jj]
+                if n <= i or not s.active[e, n]:
+                    continue
+                m2 = n - B
+                if occ_m & occ[m2] == 0:
+                    continue
+                d, _ = closest_approach(
+                    s.pos[e, n, 0] - px,
+                    s.pos[e, n, 1] - py,
+                    s.vel[e, n, 0] - vx,
+                    s.vel[e, n, 1] - vy,
+                    dt,
+                )
+                if d < best:
+                    best = d
+                if d < o.min_sep[e, m2]:
+                    o.min_sep[e, m2] = d
+                if d < los_km:
+                    o.events[0, e, m, n] = True
+                    o.events[0, e, m2, i] = True
+                    n_l += 1
+                    n_los[m2] += 1
+                    if d < nmac_km:
+                        o.events[1, e, m, n] = True
+                        o.events[1, e, m2, i] = True
+                        n_n += 1
+                        n_nmac[m2] += 1
             o.min_sep[e, m] = best
-            n_los[m] = n_l
-            n_nmac[m] = n_n
+            n_los[m] += n_l
+            n_nmac[m] += n_n
 
         # 4. Move the background (every slot: one not in the sky is placed again when it
         #    spawns); airway aircraft leave at the end of their airway, explicit ones at the
@@ -835,8 +874,25 @@ def step_episodes(actions, s, c, o):
         if not still:
             o.done[e] = True
             n_done += 1
-        _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n)
+        _observe_episode(e, o.obs, o.masks, s, c, row, best_d, best_n, in_sky)
     return n_done
+
+
+@njit(cache=True, inline="always")
+def _slots_in_sky(e, s, out):
+    """The slots the pair loops visit, ascending: ``out[:k]``, ``k`` returned. With several
+    controlled aircraft, the slots of episode ``e`` in the sky, written into ``out``: the loops
+    then visit the same pairs in the same order (so the same bits) without the empty slots
+    (most of them in ``marl/*-all``). With one, ``out`` is left as it came (``arange``) and
+    every slot is visited: listing them would cost as much as the one pass it saves. The loops
+    test ``active`` either way."""
+    if s.ac_dir.shape[1] == 1:
+        return s.active.shape[1]
+    k = 0
+    for n in range(s.active.shape[1]):  # branch-free: every slot written, the empty overwritten
+        out[k] = n
+        k += 1 if s.active[e, n] else 0
+    return k
 
 
 # ----------------------------------------------------------------------------------------------
@@ -855,13 +911,15 @@ def observe_episodes(episodes, obs, masks, s, c):
     row = np.zeros(obs.shape[2])
     best_d = np.empty(max((obs.shape[2] - 12) // 10, 1))
     best_n = np.empty(best_d.shape[0], dtype=np.int64)
+    in_sky = np.arange(s.pos.shape[1])
     for ie in range(episodes.shape[0]):
-        _observe_episode(episodes[ie], obs, masks, s, c, row, best_d, best_n)
+        _observe_episode(episodes[ie], obs, masks, s, c, row, best_d, best_n, in_sky)
 
 
 @njit(cache=True)
-def _observe_episode(e, obs, masks, s, c, row, best_d, best_n):
-    """:func:`observe_episodes` of episode ``e`` (``row``, ``best_*``: scratch space)."""
+def _observe_episode(e, obs, masks, s, c, row, best_d, best_n, in_sky):
+    """:func:`observe_episodes` of episode ``e`` (``row``, ``best_*``, ``in_sky``: scratch
+    space)."""
     M = s.ac_dir.shape[1]
     N = s.pos.shape[1]
     B = N - M
@@ -875,6 +933,8 @@ def _observe_episode(e, obs, masks, s, c, row, best_d, best_n):
     mid = 0.5 * (lo_v + hi_v)
     half = max(0.5 * (hi_v - lo_v), 1e-9)
     inv_steps = 1.0 / c.fp[P_MAX_STEPS]
+    n_sky = _slots_in_sky(e, s, in_sky)
+    one = M == 1
     for m in range(M):
         i = B + m
         x, y = s.pos[e, i, 0], s.pos[e, i, 1]
@@ -899,7 +959,8 @@ def _observe_episode(e, obs, masks, s, c, row, best_d, best_n):
         # K nearest others by insertion on squared distances (strict <: the lower index
         # wins a tie); the square root is taken for the K chosen only.
         found = 0
-        for n in range(N):
+        for jn in range(n_sky):
+            n = jn if one else in_sky[jn]  # ``one``: no list, every slot (_slots_in_sky)
             if n == i or not s.active[e, n]:
                 continue
             dx = s.pos[e, n, 0] - x

@@ -207,6 +207,32 @@ def test_reset_seed_seeds_action_spaces():
     assert s1 == s2
 
 
+def test_masked_sample_draws_what_gymnasium_draws():
+    """The action spaces' short path of ``sample(mask)`` gives gymnasium's samples and leaves
+    the stream where gymnasium leaves it, for the env's three masks and for other masks."""
+    from gymnasium import spaces
+
+    env = cdr_bench.parallel_env("marl/low-2")
+    ours = env.action_space("ownship_0")
+    assert isinstance(ours, spaces.Discrete) and ours == spaces.Discrete(27)
+    theirs = spaces.Discrete(27)
+    level_masks = [actions.action_mask(np.array(lv), 3) for lv in range(3)]
+    odd = np.zeros(27, dtype=np.int8)
+    odd[[4, 13, 20]] = 1
+    masks = [*level_masks, odd, np.zeros(27, dtype=np.int8)]
+    for seed in range(20):
+        ours.seed(seed)
+        theirs.seed(seed)
+        for i in range(300):
+            mask = masks[(seed + i) % len(masks)]
+            a, b = ours.sample(mask), theirs.sample(mask)
+            assert a == b and type(a) is type(b)
+        assert ours.sample() == theirs.sample()
+    assert ours.np_random.bit_generator.state == theirs.np_random.bit_generator.state
+    with pytest.raises(AssertionError):
+        ours.sample(np.full(27, 2, dtype=np.int8))
+
+
 def test_observation_neighbour_features_match_geometry():
     env = cdr_bench.parallel_env("high")
     obs, _ = env.reset(seed=11)
