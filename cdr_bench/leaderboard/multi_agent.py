@@ -224,10 +224,15 @@ def track_data(entries: list[Entry]) -> dict[str, Any] | None:
                 "group": e.sub.group,
                 "score": score[e.name],
                 "vs_above": above[e.name],
+                "vs_top": None if e is order[0] else sc.diff(order[0], e),
                 "vs_baseline": vs_base[e.name],
                 "side": {
                     k: _system(e, HEADLINE_SCENARIO)[k]["value"]
-                    for k in ("system_los_per_flight_hour", "system_nmac_per_flight_hour")
+                    for k in (
+                        "system_los_per_flight_hour",
+                        "system_nmac_per_flight_hour",
+                        "system_delay_s",
+                    )
                 },
             }
             for e in order
@@ -279,6 +284,20 @@ def conclusion(track: dict[str, Any], names: dict[str, str]) -> list[str]:
             f"{names[base]} by {_pp(d)} in clean flights (paired over the same episodes, two-level "
             f"bootstrap over seeds and episodes): {verdict}."
         )
+        b = next(r for r in rows if r["entry"] == base)
+        los, los_b = (x["side"]["system_los_per_flight_hour"] for x in (best, b))
+        delay, delay_b = (x["side"]["system_delay_s"] for x in (best, b))
+        fewer = "fewer" if los < los_b else "not fewer"
+        out.append(
+            f"Per flight hour it has {fewer} losses of separation than {names[base]} "
+            f"({los:.3g} vs {los_b:.3g}), and its successful flights take {delay:+.0f} s against "
+            f"the direct time ({names[base]}: {delay_b:+.0f} s): a share of clean flights also "
+            "rises when flights are shorter."
+        )
+        if best is not top and top["group"] not in ("learned", "hybrid"):
+            lead = best["vs_top"]  # best - top
+            ahead = {"diff": -lead["diff"], "ci95": [-lead["ci95"][1], -lead["ci95"][0]]}
+            out.append(f"The top entry, {names[top['entry']]}, is ahead of it by {_pp(ahead)}.")
     for r in others:
         if r in learned[:1]:
             continue
