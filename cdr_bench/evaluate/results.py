@@ -427,9 +427,13 @@ def _parse_episodes(path: Path, text: str, digest: str) -> list[dict[str, Any]]:
     return eps
 
 
-def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[str, Any]:
+def add_metrics(
+    result: dict[str, Any], episodes: list[dict[str, Any]], roles: bool = True
+) -> dict[str, Any]:
     """``result`` with each scenario's ``metrics`` (and, where an episode has several
-    controlled aircraft, ``system_metrics``) computed from its per-episode records."""
+    controlled aircraft, ``system_metrics``) computed from its per-episode records;
+    ``roles=False``: the system metrics only (what the leaderboard's multi-agent track shows;
+    the per-role means of thousands of flights are the costly part)."""
     from cdr_bench.evaluate.metrics import scenario_metrics, system_metrics
 
     by_id: dict[str, list[dict[str, Any]]] = {}
@@ -437,7 +441,8 @@ def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[
         by_id.setdefault(e.get("scenario"), []).append(e)  # type: ignore[arg-type]
     for s in result.get("scenarios", []):
         eps = by_id.get(s.get("id"), [])
-        s["metrics"] = scenario_metrics(eps)
+        if roles:
+            s["metrics"] = scenario_metrics(eps)
         system = system_metrics(eps)
         if system is not None:
             s["system_metrics"] = system
@@ -446,10 +451,13 @@ def add_metrics(result: dict[str, Any], episodes: list[dict[str, Any]]) -> dict[
     return result
 
 
-def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str, Any]:
+def read_result(
+    path: str | os.PathLike[str], metrics: bool = True, roles: bool = True
+) -> dict[str, Any]:
     """A result JSON, checked for kind and schema version, and against its per-episode log
     (present, same SHA-256), with each scenario's ``metrics`` computed from the log (unless
-    ``metrics`` is false); ``ValueError`` naming the file otherwise."""
+    ``metrics`` is false; ``roles=False``: the system metrics only, :func:`add_metrics`);
+    ``ValueError`` naming the file otherwise."""
     p = Path(path)
     try:
         data = json.loads(read_input(p, MAX_RESULT_BYTES, "result file").decode("utf-8"))
@@ -502,7 +510,7 @@ def read_result(path: str | os.PathLike[str], metrics: bool = True) -> dict[str,
             "when read): an edited file; re-run the evaluation"
         )
     eps = _parse_episodes(ep, text, digest)
-    return add_metrics(data, eps) if metrics else data
+    return add_metrics(data, eps, roles) if metrics else data
 
 
 def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:

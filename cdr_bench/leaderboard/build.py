@@ -98,6 +98,7 @@ from cdr_bench.leaderboard.verify import (
     MIN_AGREEMENT,
     agreement_verdict,
     batches_of,
+    committed_ownship,
     fresh_verdict,
 )
 
@@ -876,9 +877,8 @@ def _check(
             if not ok:
                 diffs.append(f"results/{sub.name}.json: {text}")
             if got.get("fresh") is not None:
-                scored = read_result(result_path(results_dir, sub.name))
-                sc = next(s for s in scored["scenarios"] if s["id"] == sub.headline_scenario)
-                text, ok = fresh_verdict(sub.name, sc["metrics"]["ownship"], got["fresh"])
+                own = committed_ownship(result_path(results_dir, sub.name), sub.headline_scenario)
+                text, ok = fresh_verdict(sub.name, own, got["fresh"])
                 log(text)
                 if not ok:
                     diffs.append(f"results/{sub.name}.json: {text}")

@@ -120,7 +120,8 @@ def check_result(sub: Submission, path: Path) -> tuple[dict[str, Any], list[dict
     per-episode file; :class:`UserError` naming the file otherwise. Returns the result and its
     per-episode records."""
     try:
-        result = read_result(path)
+        # a multi-agent entry is shown by its system metrics only
+        result = read_result(path, roles=sub.track == "single-agent")
         episodes = read_episodes(path, result)
     except ValueError as e:
         raise UserError(str(e)) from None

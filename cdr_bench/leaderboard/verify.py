@@ -207,6 +207,22 @@ def fresh_run(
     }
 
 
+def committed_ownship(path: str | Path, scenario: str) -> dict[str, Any]:
+    """The ownship's metrics on ``scenario`` of a committed result (read from its per-episode
+    log; the other scenarios and roles are not computed)."""
+    from cdr_bench.evaluate.metrics import group_metrics, role_of
+
+    result = read_result(path, metrics=False)
+    records = [
+        ac
+        for ep in read_episodes(path, result)
+        if ep["scenario"] == scenario
+        for ac in ep["aircraft"]
+        if role_of(ac["id"]) == "ownship"
+    ]
+    return group_metrics(records)
+
+
 FRESH_METRICS = ("clean_success_rate",)
 """The metrics the fresh-episode test compares (the headline: what ranks an entry)."""
 
