@@ -1168,3 +1168,43 @@ class DiffusionActor:
 def new_generator(seed: int | None) -> np.random.Generator:
     """The agents' random stream: ``Generator(PCG64(seed))`` (seed None -> 0)."""
     return np.random.Generator(np.random.PCG64(0 if seed is None else int(seed)))
+
+
+class CheckpointActorAgent:
+    """The agent protocol for a weights-only actor checkpoint of the trainers' layout
+    (``{"config": {...}, "state_dict": ...}`` read with ``torch.load(weights_only=True)``;
+    Linear+Tanh layers, Linear -> 27 logits): the argmax of the masked logits on this module's
+    fixed numeric path, for every aircraft on its own observation. An agent file subclasses it
+    with ``algorithm`` (the ``config["algorithm"]`` it accepts) and ``default_checkpoint`` (the
+    file beside it, used when neither ``checkpoint`` nor ``CDR_BENCH_CHECKPOINT`` is given)."""
+
+    algorithm: str = ""
+    default_checkpoint: str = ""
+
+    def __init__(self, observation_space: Any = None, action_space: Any = None,
+                 checkpoint: str | None = None) -> None:  # fmt: skip
+        import os
+
+        import torch
+
+        self.checkpoint = (
+            checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(self.default_checkpoint)
+        )
+        ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
+        config = ck["config"]
+        if config.get("algorithm") != self.algorithm:
+            raise ValueError(
+                f"{self.checkpoint}: not a {self.algorithm} actor (algorithm "
+                f"{config.get('algorithm')!r})"
+            )
+        state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
+        self.net = MLP.from_state_dict(state, "", "tanh")
+
+    def reset(self, seed: int | None = None) -> None:
+        """Deterministic policy: nothing to re-seed."""
+
+    def act_batch(self, observations: Any, masks: Any) -> NDArray[np.int64]:
+        return masked_argmax(self.net(observations), masks)
+
+    def act(self, obs_dict: dict[str, Any]) -> int:
+        return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])
