@@ -376,7 +376,7 @@ def evaluate_submission(
     )
     if rerun is None:
         try:
-            result = read_result(out)
+            result = read_result(out, metrics=False)
         except ValueError as e:
             raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
         expected = current_identity(sub, root)["sha256"]
@@ -406,7 +406,7 @@ def _committed(results_dir: Path, subs: list[Submission], track: str) -> int:
         p = result_path(results_dir, s.name)
         if p.exists():
             try:
-                counts |= {sc["episodes"] for sc in read_result(p)["scenarios"]}
+                counts |= {sc["episodes"] for sc in read_result(p, metrics=False)["scenarios"]}
             except ValueError:
                 continue
     if len(counts) > 1:
@@ -759,7 +759,7 @@ def identity_diffs(views: list[Submission], root: Path, results_dir: Path) -> li
     for v in views:
         p = result_path(results_dir, v.name)
         try:
-            old = read_result(p)["agent"]
+            old = read_result(p, metrics=False)["agent"]
         except ValueError:
             continue  # reported by the replay
         new = current_identity(v, root)
@@ -829,7 +829,7 @@ def _check(
         for sub in chosen:
             committed = result_path(results_dir, sub.name)
             try:
-                result = read_result(committed)
+                result = read_result(committed, metrics=False)
             except ValueError:
                 continue
             grid = list(batches_of(result))

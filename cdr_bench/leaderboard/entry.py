@@ -57,7 +57,7 @@ def _rerun(spec: dict[str, Any], options: Any) -> None:
 
     rr = spec["rerun"]
     try:
-        result = read_result(rr["result"])
+        result = read_result(rr["result"], metrics=False)
         episodes = read_episodes(rr["result"], result)
     except ValueError as e:
         raise UserError(str(e)) from None
@@ -136,7 +136,7 @@ def _analyses(spec: dict[str, Any], options: Any) -> None:
             from cdr_bench.leaderboard.verify import replayed_traces
 
             try:
-                result = read_result(spec["rerun"]["result"])
+                result = read_result(spec["rerun"]["result"], metrics=False)
                 eps = read_episodes(spec["rerun"]["result"], result)
             except ValueError as e:
                 raise UserError(str(e)) from None
