@@ -39,7 +39,7 @@ from cdr_bench.evaluate.remote import (
 from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios import ScenarioConfig
-from cdr_bench.sim import OUTCOME_NAMES, observation_bounds
+from cdr_bench.sim import OUTCOME_NAMES, kernels, observation_bounds
 from cdr_bench.sim.units import KM_PER_S_PER_KT
 from cdr_bench.vector_env import VectorEnv, VectorStep, observation_space
 
@@ -170,16 +170,14 @@ def run_batch(
     invalid = np.zeros((E, M), dtype=np.int64)
     min_sep = np.full((E, M), np.inf)
     outcome = np.zeros((E, M), dtype=np.int8)
-    # Field metrics (docs/model.md §10.1): events are pairs entering a state.
-    los_events = np.zeros((E, M), dtype=np.int64)
-    nmac_events = np.zeros((E, M), dtype=np.int64)
-    # The same, with other controlled aircraft only (recorded where there are several): a pair
-    # of controlled aircraft is in both of its records, and the system metrics count it once.
-    los_events_ac = np.zeros((E, M), dtype=np.int64)
-    nmac_events_ac = np.zeros((E, M), dtype=np.int64)
+    # Field metrics (docs/model.md §10.1): events are pairs entering a state, counted by
+    # kernels.pair_events in one pass a step. The *_ac counts are the same with other
+    # controlled aircraft only (recorded where there are several): a pair of controlled
+    # aircraft is in both of its records, and the system metrics count it once.
+    counts = np.zeros((8, E, M), dtype=np.int64)
+    (los_events, nmac_events, los_events_ac, nmac_events_ac) = counts[:4]
+    (los_steps, conflict_events, los_now, nmac_now) = counts[4:]
     B = env.n_background
-    los_steps = np.zeros((E, M), dtype=np.int64)
-    conflict_events = np.zeros((E, M), dtype=np.int64)
     manoeuvres = np.zeros((E, M), dtype=np.int64)
     path_km = np.zeros((E, M))
     prev_los = np.zeros((E, M, N), dtype=bool)
@@ -261,9 +259,7 @@ def run_batch(
 
     def on_step(actions: np.ndarray, step: VectorStep) -> None:
         """The step's part of every metric (and of the traces)."""
-        nonlocal steps, los, nmac, goal_r, safety_r, invalid, los_events, nmac_events
-        nonlocal los_events_ac, nmac_events_ac
-        nonlocal los_steps, conflict_events, manoeuvres, path_km, flight_s
+        nonlocal steps, los, nmac, goal_r, safety_r, invalid, manoeuvres, path_km, flight_s
         nonlocal before_km, prev_los, prev_nmac, in_conflict, conflict_now
         manoeuvres += actions != HOLD
         res = step.result
@@ -275,27 +271,21 @@ def run_batch(
         flight_s += np.where(res.acting, part * dt_s, 0.0)
         before_km = after_km.copy()
         los_with, nmac_with = res.los_with, res.nmac_with
-        new_los = los_with & ~prev_los
-        new_nmac = nmac_with & ~prev_nmac
-        los_events += new_los.sum(axis=2)
-        nmac_events += new_nmac.sum(axis=2)
-        if M > 1:
-            los_events_ac += new_los[..., B:].sum(axis=2)
-            nmac_events_ac += new_nmac[..., B:].sum(axis=2)
+        env.conflicts(conflict_now)
+        kernels.pair_events(
+            los_with, nmac_with, prev_los, prev_nmac, conflict_now, in_conflict, B, counts
+        )
         prev_los, prev_nmac = los_with, nmac_with
-        los_any = los_with.any(axis=2)
-        los_steps += los_any
+        in_conflict, conflict_now = conflict_now, in_conflict
+        los_any = los_now.astype(bool)
         los |= los_any
-        nmac |= nmac_with.any(axis=2)
+        nmac |= nmac_now.astype(bool)
         goal_r += res.goal_reward
         safety_r += res.safety_reward
         invalid += res.invalid_action
         np.minimum(min_sep, res.min_sep_km, out=min_sep)
         done = res.outcome != 0
         outcome[done] = res.outcome[done]
-        env.conflicts(conflict_now)
-        conflict_events += (conflict_now & ~in_conflict).sum(axis=2)
-        in_conflict, conflict_now = conflict_now, in_conflict
         for i, t in enumerate(traces):
             if res.acting[i].any():
                 t["frames"].append(_frame(env, i, los_any[i]))

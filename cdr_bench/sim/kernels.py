@@ -1042,3 +1042,40 @@ def conflicts_episodes(out, s, c):
                 qx, qy = s.vel[e, n, 0] - vx0, s.vel[e, n, 1] - vy0
                 d_cpa, _ = closest_approach(px, py, qx, qy, look)
                 out[e, m, n] = d_cpa < los_km
+
+
+@njit(cache=True)
+def pair_events(
+    los_with, nmac_with, prev_los, prev_nmac, conflict_now, in_conflict, first_controlled, counts
+):
+    """One step's separation events of every controlled aircraft, in one pass over its pairs
+    (``(E, M, N)`` booleans: LoS and NMAC with each aircraft now and at the previous step,
+    predicted conflict now and before). ``counts`` (``(8, E, M)`` int64) is added to in place:
+    0 LoS events (pairs entering LoS), 1 NMAC events, 2 and 3 the same with controlled aircraft
+    only (columns from ``first_controlled`` on), 4 steps in LoS, 5 conflict events (pairs
+    entering a predicted conflict); and set: 6 in LoS now, 7 in NMAC now (0/1)."""
+    E, M, N = los_with.shape
+    for e in range(E):
+        for m in range(M):
+            los_any = 0
+            nmac_any = 0
+            for n in range(N):
+                lw = los_with[e, m, n]
+                nw = nmac_with[e, m, n]
+                if lw:
+                    los_any = 1
+                    if not prev_los[e, m, n]:
+                        counts[0, e, m] += 1
+                        if n >= first_controlled:
+                            counts[2, e, m] += 1
+                if nw:
+                    nmac_any = 1
+                    if not prev_nmac[e, m, n]:
+                        counts[1, e, m] += 1
+                        if n >= first_controlled:
+                            counts[3, e, m] += 1
+                if conflict_now[e, m, n] and not in_conflict[e, m, n]:
+                    counts[5, e, m] += 1
+            counts[4, e, m] += los_any
+            counts[6, e, m] = los_any
+            counts[7, e, m] = nmac_any
