@@ -17,6 +17,8 @@ from cdr_bench.leaderboard import tables
 from tests.leaderboard.conftest import ROOT
 
 LB = ROOT / "leaderboard"
+# the staging folder of a `leaderboard build --check` running beside the tests (.ci/run)
+SCRATCH = shutil.ignore_patterns(".build-*")
 
 
 def test_sample_target_scored_the_staged_sample_target_checkpoint() -> None:
@@ -56,7 +58,7 @@ def test_sample_target_scored_the_staged_sample_target_checkpoint() -> None:
 def test_a_missing_analysis_file_is_an_error_naming_it(tmp_path: Path) -> None:
     folder = "agents/diffusion_ac/analysis/sample-target"
     repo = tmp_path / "repo"
-    shutil.copytree(LB, repo / "leaderboard")
+    shutil.copytree(LB, repo / "leaderboard", ignore=SCRATCH)
     (repo / folder).mkdir(parents=True)
     r = tables.Repo(repo / "leaderboard")
     with pytest.raises(UserError, match="sample-target/result.json: no such result file"):
@@ -79,7 +81,7 @@ def test_the_per_episode_file_is_read_compressed_or_plain_and_checked(tmp_path: 
     src = ROOT / folder
     packed = tmp_path / "packed" / folder
     packed.mkdir(parents=True)
-    shutil.copytree(LB, tmp_path / "packed" / "leaderboard")
+    shutil.copytree(LB, tmp_path / "packed" / "leaderboard", ignore=SCRATCH)
     shutil.copy(src / "result.json", packed / "result.json")
     shutil.copy(src / "result.jsonl.xz", packed / "result.jsonl.xz")
     got, _ = tables.Repo(tmp_path / "packed" / "leaderboard").analysis(folder, "x", ())
