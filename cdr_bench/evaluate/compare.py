@@ -14,6 +14,13 @@ A metric that is one yes/no outcome per episode (:data:`BINARY`: success, clean 
 the ownship) also gets McNemar's exact test (:func:`mcnemar_exact`: the two-sided binomial test
 of the discordant episodes, on exact integers); :func:`holm` adjusts the p-values of a
 statement that combines several tests.
+
+Where the episodes have several controlled aircraft (the multi-agent scenarios), the system
+metrics (:data:`cdr_bench.evaluate.metrics.SYSTEM_METRICS`: clean flights, LoS and NMAC per
+flight hour over every pair, delay, who pays) are compared too, in rows of ``aircraft``
+``system``: the same paired bootstrap over whole episodes, of the ratio of the per-episode
+numerators and denominators the system metric sums
+(:meth:`~cdr_bench.evaluate.metrics.Metric.compute_system`).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from cdr_bench.evaluate.metrics import (
     BOOTSTRAP_SEED,
     METRICS,
     ROLES,
+    SYSTEM_METRICS,
     get_metric,
     role_of,
 )
@@ -171,7 +179,7 @@ def compare(
     every metric or those named in ``metrics`` (the same numbers either way: the resampled
     episodes are drawn per scenario); :class:`UserError` if a compared scenario is not on the
     same episodes."""
-    known = [m.key for m in METRICS]
+    known = [m.key for m in (*METRICS, *SYSTEM_METRICS)]
     names = known if metrics is None else list(dict.fromkeys(metrics))
     unknown = [m for m in names if m not in known]
     if unknown:
@@ -225,8 +233,9 @@ def compare(
         for role in _roles(xa):
             if role not in roles_b:
                 continue
-            na, nb = _sums(xa, role, names), _sums(xb, role, names)
-            for name in names:
+            shown = [n for n in names if get_metric(n).scope == "aircraft"]
+            na, nb = _sums(xa, role, shown), _sums(xb, role, shown)
+            for name in shown:
                 va, vb = float(_ratio(na[name])), float(_ratio(nb[name]))
                 undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
                 diffs = _ratio(nb[name], idx) - _ratio(na[name], idx)
@@ -250,6 +259,9 @@ def compare(
                         **_mcnemar(name, na[name], nb[name]),
                     }
                 )
+        if max(len(e["aircraft"]) for e in xa) > 1:  # several controlled aircraft
+            system = [n for n in names if get_metric(n).scope == "system"]
+            rows += _system_rows(sid, xa, xb, idx, system)
     notes += _undefined_notes(rows)
     return {
         "a": {"path": str(path_a), "agent": a["agent"]["name"]},
@@ -258,6 +270,57 @@ def compare(
         "notes": notes,
         "rows": rows,
     }
+
+
+def _system_sums(episodes: list[dict[str, Any]], key: str) -> NDArray[np.float64]:
+    """``(episodes, 2)``: the per-episode numerator and denominator the system metric ``key``
+    sums over a scenario (exposure in hours for a rate per hour)."""
+    m = get_metric(key)
+    assert m.over is not None  # a system metric always has its denominator
+    nd = np.array(
+        [[float(m.value(e["aircraft"])), float(m.over(e["aircraft"]))] for e in episodes],
+        dtype=float,
+    ).reshape(-1, 2)
+    if m.aggregate == "per_h":
+        nd[:, 1] /= 3600.0
+    return nd
+
+
+def _system_rows(
+    sid: str,
+    xa: list[dict[str, Any]],
+    xb: list[dict[str, Any]],
+    idx: NDArray[np.int64],
+    keys: list[str],
+) -> list[dict[str, Any]]:
+    """The paired differences B - A of the system metrics ``keys`` on scenario ``sid`` (whole
+    episodes resampled with ``idx``, as the aircraft rows)."""
+    rows = []
+    for key in keys:
+        na, nb = _system_sums(xa, key), _system_sums(xb, key)
+        va, vb = float(_ratio(na)), float(_ratio(nb))
+        diffs = _ratio(nb, idx) - _ratio(na, idx)
+        diffs = diffs[np.isfinite(diffs)]
+        lo, hi = (
+            (float(np.percentile(diffs, 2.5)), float(np.percentile(diffs, 97.5)))
+            if diffs.size
+            else (np.nan, np.nan)
+        )
+        undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
+        rows.append(
+            {
+                "scenario": sid,
+                "aircraft": "system",
+                "metric": key,
+                "a": va,
+                "b": vb,
+                "diff": vb - va,
+                "ci95": [lo, hi],
+                "significant": bool(lo > 0 or hi < 0),
+                **({"undefined": undefined} if undefined else {}),
+            }
+        )
+    return rows
 
 
 def _mcnemar(name: str, na: NDArray[np.float64], nb: NDArray[np.float64]) -> dict[str, Any]:
@@ -272,7 +335,7 @@ def _mcnemar(name: str, na: NDArray[np.float64], nb: NDArray[np.float64]) -> dic
 
 def _why_undefined(key: str) -> str:
     """Why ``key`` has no value for a group of episodes: its denominator is zero."""
-    m = next((m for m in METRICS if m.key == key), None)
+    m = next((m for m in (*METRICS, *SYSTEM_METRICS) if m.key == key), None)
     if m is None:
         return "no episode it counts"
     what = {
@@ -315,7 +378,7 @@ def comparison_table(cmp: dict[str, Any]) -> str:
         "McNemar p (A+/B-, A-/B+)",
     ]  # fmt: skip
     rows = [head]
-    kinds = {m.key: m.kind for m in METRICS}
+    kinds = {m.key: m.kind for m in (*METRICS, *SYSTEM_METRICS)}
     for r in cmp["rows"]:
         pct = kinds.get(r["metric"], "") == "rate"
         vf, df = ("{:.1f}%", "{:+.1f}") if pct else ("{:.3f}", "{:+.3f}")

@@ -170,3 +170,42 @@ def test_single_aircraft_records_carry_no_pair_fields_and_tables_show_the_system
     assert "system (every controlled aircraft" in text and "LoS/h" in text
     md = report_markdown([("r.json", result)])
     assert "System metrics" in md and "delay spread s" in md
+
+
+def test_compare_pairs_the_system_metrics_over_whole_episodes(low_all, monkeypatch):
+    """``cdr-bench compare`` of two multi-agent results has a ``system`` row for every system
+    metric: the values are the results' own system metrics, the interval pairs whole episodes;
+    a metric filter keeps only the named ones, and a one-aircraft scenario has no such row."""
+    from cdr_bench.evaluate import compare as cmp_mod
+
+    _, runs = low_all
+
+    def result(name: str, episodes: list) -> tuple[dict, list]:
+        sc = {"id": "marl/low-all", "config_hash": "c", "episodes": 30, "seeds_sha256": "s"}
+        eps = [{**e, "scenario": "marl/low-all"} for e in episodes]
+        return {"agent": {"name": name}, "scenarios": [sc]}, eps
+
+    loaded = {p: result(p, runs[p]["episodes"]) for p in ("direct", "mvp")}
+    monkeypatch.setattr(cmp_mod, "_load", lambda p: loaded[str(p)])
+    got = cmp_mod.compare("direct", "mvp")
+    rows = {r["metric"]: r for r in got["rows"] if r["aircraft"] == "system"}
+    assert set(rows) == {m.key for m in SYSTEM_METRICS}
+    a, b = (system_metrics(runs[n]["episodes"]) for n in ("direct", "mvp"))
+    clean = rows["system_clean_rate"]
+    assert clean["a"] == pytest.approx(a["system_clean_rate"]["value"], abs=1e-6)
+    assert clean["b"] == pytest.approx(b["system_clean_rate"]["value"], abs=1e-6)
+    lo, hi = clean["ci95"]
+    assert lo <= clean["diff"] <= hi and clean["diff"] > 0 and clean["significant"]
+    assert "system" in cmp_mod.comparison_table(got)
+    only = cmp_mod.compare("direct", "mvp", metrics=["system_los_per_flight_hour", "success_rate"])
+    assert {(r["aircraft"], r["metric"]) for r in only["rows"]} == {
+        ("system", "system_los_per_flight_hour"),
+        ("ownship", "success_rate"),
+        ("traffic", "success_rate"),
+    }
+    single = {
+        p: (r, [{**e, "aircraft": e["aircraft"][:1]} for e in eps])
+        for p, (r, eps) in loaded.items()
+    }
+    monkeypatch.setattr(cmp_mod, "_load", lambda p: single[str(p)])
+    assert all(r["aircraft"] != "system" for r in cmp_mod.compare("direct", "mvp")["rows"])
