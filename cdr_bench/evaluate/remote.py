@@ -50,12 +50,14 @@ from cdr_bench.evaluate.loader import (
     resolve_agent_path,
 )
 from cdr_bench.evaluate.sandbox import (
+    Cgroup,
     Confined,
     Confinement,
     Limits,
     child_setup,
     clean,
     confined,
+    make_cgroup,
     make_scratch,
     nproc_limit,
     seed_numba_cache,
@@ -120,6 +122,7 @@ class AgentProcess:
         # -P: no folder of the caller (the current folder, a json.py there) on the import path
         argv = [sys.executable, "-P", "-m", "cdr_bench.evaluate.agent_host", str(self.path)]
         self._scratch = make_scratch()
+        self._cgroup: Cgroup | None = None
         # One thread per agent process (the evaluator runs one per worker), as in the sandbox;
         # a thread count the caller sets in the environment wins.
         env: dict[str, str] = {**ONE_THREAD, **os.environ, "TMPDIR": str(self._scratch)}
@@ -141,6 +144,7 @@ class AgentProcess:
             argv, env = box.argv, box.env
             stderr = open(self.log, "wb")  # noqa: SIM115 - closed right after the start
             nproc = nproc_limit()
+            self._cgroup = make_cgroup(options.limits)
         try:
             self.proc = subprocess.Popen(
                 argv,
@@ -150,7 +154,7 @@ class AgentProcess:
                 env=env,
                 start_new_session=True,
                 pass_fds=box.pass_fds if box is not None else (),
-                preexec_fn=child_setup(options.limits, nproc),
+                preexec_fn=child_setup(options.limits, nproc, self._cgroup),
             )
         except OSError as e:
             self._cleanup()
@@ -341,6 +345,9 @@ class AgentProcess:
         self._cleanup()
 
     def _cleanup(self) -> None:
+        if self._cgroup is not None:
+            self._cgroup.close()
+            self._cgroup = None
         if self._scratch is not None:
             shutil.rmtree(self._scratch, ignore_errors=True)
             self._scratch = None

@@ -48,12 +48,15 @@ What is defended, and how:
   (:func:`remove_stale_scratch`).
 * **Limits**: CPU seconds and address space per process (``RLIMIT_CPU``, ``RLIMIT_AS``); the
   time of loading and of every decision is enforced by the evaluator from outside
-  (:mod:`.remote`). **Processes**: ``RLIMIT_NPROC`` is per *host* user and counts every
+  (:mod:`.remote`). **The whole tree** (:func:`make_cgroup`): where a control group can be
+  written (root on cgroup v1, or a delegated cgroup v2 group), bwrap and everything it starts
+  are in their own group, capped at :data:`PIDS_MAX` tasks (``pids.max``) and at the memory
+  limit plus :func:`tmpfs_budget_mb` (``memory.limit_in_bytes`` / ``memory.max``; tmpfs pages
+  are charged to the group that wrote them, so RAM-backed files count); the group is removed
+  with the tree. **Processes** otherwise: ``RLIMIT_NPROC`` is per *host* user and counts every
   process of that user, so it is set to the user's current count plus :data:`NPROC_HEADROOM`
   (a fork bomb stops there); it is not enforced for a host root user (the kernel exempts uid 0
-  even inside a user namespace), so run the build as an ordinary user where that matters. The
-  kernel's per-cgroup ``pids`` limit would be exact but needs a delegated cgroup, which an
-  unprivileged evaluator does not have.
+  even inside a user namespace), which is why the control group matters there.
 * **A clean environment**: ``PATH``, the scratch ``HOME``, one thread per process, and the
   variables the caller names (``CDR_BENCH_CHECKPOINT``); nothing else.
 * **Conveniences, not boundaries**: ``TORCH_FORCE_WEIGHTS_ONLY_LOAD=1`` and an audit hook in
@@ -70,11 +73,11 @@ What it does not defend:
   can use them to know the evaluation episodes is the leaderboard check's business, not the
   sandbox's);
 * it can use all the CPU time and memory its limits allow, and the wall time the evaluator
-  allows; the tmpfs budget comes on top of ``RLIMIT_AS`` (no memory cgroup);
+  allows; without a writable control group, memory is capped per process only (several
+  processes, plus the tmpfs budget, may hold more) and, for root, processes are not capped;
 * run by root, uid 65534 in the sandbox is host uid 0 outside it (bubblewrap maps the
   sandbox user to the caller): it has no capability and sees only read-only binds, but files
-  it creates on a writable bind would be root's (there is none); the process cap does not hold
-  for root (above);
+  it creates on a writable bind would be root's (there is none);
 * the seccomp filter exists only for x86-64 and AArch64; elsewhere the sandbox runs without
   it (and says so in :func:`isolation`'s description).
 
@@ -230,17 +233,165 @@ def die_with_parent(parent: int) -> None:
         os._exit(1)  # the parent died before the signal was armed
 
 
-def child_setup(limits: Limits | None, nproc: int | None = None):  # type: ignore[no-untyped-def]
-    """A ``preexec_fn``: parent-death signal, then ``limits`` (when given). Build it in the
-    parent (it captures the parent's PID)."""
+def child_setup(  # type: ignore[no-untyped-def]
+    limits: Limits | None, nproc: int | None = None, cgroup: Cgroup | None = None
+):
+    """A ``preexec_fn``: parent-death signal, then ``limits`` (when given), then entry into
+    ``cgroup`` (when given). Build it in the parent (it captures the parent's PID)."""
     parent = os.getpid()
 
     def setup() -> None:
         die_with_parent(parent)
         if limits is not None:
             set_limits(limits, nproc)
+        if cgroup is not None:
+            cgroup.enter()
 
     return setup
+
+
+# ----------------------------------------------------------------------------------------------
+# Control groups: a process cap and a memory cap for the whole confined tree, where offered
+
+CGROUP_ROOT = Path("/sys/fs/cgroup")
+"""Where the control-group file systems are mounted."""
+CGROUP_PREFIX = "cdr-bench-agent-"
+"""A confined agent's groups are ``<its evaluator's group>/cdr-bench-agent-<owner pid>-<n>``."""
+PIDS_MAX = NPROC_HEADROOM
+"""Processes and threads a confined agent's tree may hold at once (its group's ``pids.max``)."""
+
+
+@dataclass
+class Cgroup:
+    """The control groups of one confined process tree (one per hierarchy: cgroup v1 has one
+    for ``pids`` and one for ``memory``, v2 one for both): the child enters them between fork
+    and exec (:meth:`enter`), so every process it starts, the agent's included, is counted;
+    :meth:`close` removes them once the tree is gone."""
+
+    dirs: tuple[Path, ...]
+
+    def enter(self) -> None:
+        pid = str(os.getpid()).encode()
+        for d in self.dirs:
+            fd = os.open(d / "cgroup.procs", os.O_WRONLY)
+            try:
+                os.write(fd, pid)
+            finally:
+                os.close(fd)
+
+    def close(self) -> None:
+        """Remove the groups (waiting up to three seconds for the killed tree's last tasks to be
+        reaped); one still busy then is removed by a later run (:func:`remove_stale_cgroups`)."""
+        import time
+
+        left = list(self.dirs)
+        for _ in range(150):
+            for d in list(left):
+                try:
+                    d.rmdir()
+                    left.remove(d)
+                except FileNotFoundError:
+                    left.remove(d)
+                except OSError:
+                    pass
+            if not left:
+                return
+            time.sleep(0.02)
+
+
+def _own_groups() -> dict[str, Path]:
+    """This process's group folder per controller (``pids``, ``memory``; ``""`` for cgroup v2),
+    where that hierarchy is mounted at the usual place."""
+    out: dict[str, Path] = {}
+    try:
+        lines = Path("/proc/self/cgroup").read_text().splitlines()
+    except OSError:
+        return out
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        for c in controllers.split(",") if controllers else [""]:
+            mount = CGROUP_ROOT / c if c else CGROUP_ROOT
+            if c == "" and not (mount / "cgroup.controllers").exists():
+                mount = CGROUP_ROOT / "unified"
+            if c in ("pids", "memory", ""):
+                out[c] = mount / path.lstrip("/")
+    return out
+
+
+def _write(path: Path, value: str) -> None:
+    path.write_text(value)
+
+
+def remove_stale_cgroups() -> None:
+    """Remove the groups (:data:`CGROUP_PREFIX`) whose owner process is dead (a crash or
+    ``kill -9`` of the evaluator left them; empty by then, as their processes died with it)."""
+    for parent in _own_groups().values():
+        try:
+            entries = list(os.scandir(parent))
+        except OSError:
+            continue
+        for e in entries:
+            owner = e.name[len(CGROUP_PREFIX) :].split("-", 1)[0]
+            if e.name.startswith(CGROUP_PREFIX) and owner.isdigit() and not pid_alive(int(owner)):
+                try:
+                    os.rmdir(e.path)
+                except OSError:
+                    pass
+
+
+_CGROUP_SEQ = [0]
+
+
+@lru_cache(maxsize=1)
+def cgroup_support() -> str | None:
+    """Which hierarchies can cap a confined tree here (``"v1"``, ``"v2"``; None: none, e.g. an
+    unprivileged user without a delegated group): a probe group is created and removed."""
+    cg = make_cgroup(Limits(), probe=True)
+    if cg is None:
+        return None
+    cg.close()
+    return "v2" if cg.dirs and cg.dirs[0].parent == _own_groups().get("") else "v1"
+
+
+def make_cgroup(limits: Limits | None, probe: bool = False) -> Cgroup | None:
+    """New groups capping a confined tree at :data:`PIDS_MAX` tasks and at ``limits``'s memory
+    plus the tmpfs budget (:func:`tmpfs_budget_mb`: the kernel charges tmpfs pages to the group
+    that wrote them, so RAM-backed files count), or None where no hierarchy can be written
+    (then the tree has ``RLIMIT_NPROC`` and ``RLIMIT_AS`` only, see the module docstring)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    if not probe:
+        remove_stale_cgroups()
+    own = _own_groups()
+    memory_mb = (limits.memory_mb if limits is not None else Limits().memory_mb) + tmpfs_budget_mb()
+    _CGROUP_SEQ[0] += 1
+    name = f"{CGROUP_PREFIX}{os.getpid()}-{_CGROUP_SEQ[0]}"
+    made: list[Path] = []
+    try:
+        if "pids" in own and "memory" in own:  # cgroup v1
+            pids, mem = own["pids"] / name, own["memory"] / name
+            pids.mkdir()
+            made.append(pids)
+            mem.mkdir()
+            made.append(mem)
+            _write(pids / "pids.max", str(PIDS_MAX))
+            _write(mem / "memory.limit_in_bytes", str(memory_mb * 1024 * 1024))
+        elif "" in own:  # cgroup v2: needs both controllers delegated to this group
+            d = own[""] / name
+            d.mkdir()
+            made.append(d)
+            _write(d / "pids.max", str(PIDS_MAX))
+            _write(d / "memory.max", str(memory_mb * 1024 * 1024))
+        else:
+            return None
+    except OSError:
+        for d in reversed(made):
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+        return None
+    return Cgroup(tuple(made))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -610,9 +761,15 @@ def isolation() -> tuple[str, str]:
         else:
             if probe.returncode == 0:
                 filtered = "seccomp filter" if filt is not None else "NO seccomp filter here"
+                capped = (
+                    f"; the process tree in its own control group: {PIDS_MAX} tasks, memory "
+                    "limit plus tmpfs"
+                    if cgroup_support() is not None
+                    else ""
+                )
                 return "bwrap", (
                     "confined (bubblewrap: only the agent's files visible, read-only, no "
-                    f"network, own PIDs, uid {SANDBOX_UID}, {filtered})"
+                    f"network, own PIDs, uid {SANDBOX_UID}, {filtered}{capped})"
                 )
             why = clean(probe.stderr, 1) or f"exit code {probe.returncode}"
         finally:

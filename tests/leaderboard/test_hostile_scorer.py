@@ -6,6 +6,7 @@ before the sandbox and scorer were tightened (it fails there) and is refused now
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import signal
@@ -21,7 +22,15 @@ import pytest
 from cdr_bench.evaluate.loader import AgentError
 from cdr_bench.evaluate.remote import AgentOptions, AgentProcess
 from cdr_bench.evaluate.results import PartialLog, canonical, resume_key_path, sha256_text
-from cdr_bench.evaluate.sandbox import Confinement, Limits, isolation, seccomp_filter
+from cdr_bench.evaluate.sandbox import (
+    CGROUP_PREFIX,
+    PIDS_MAX,
+    Confinement,
+    Limits,
+    cgroup_support,
+    isolation,
+    seccomp_filter,
+)
 from tests.leaderboard.conftest import make_repo, submission_yaml
 
 pytestmark = pytest.mark.skipif(
@@ -151,6 +160,77 @@ def test_writing_100_mb_to_tmp_hits_the_cap(tmp_path: Path) -> None:
         mib, err = cast("list[int]", written)
         assert mib < 100 or (mib < 300 and where not in ("/tmp", "/dev/shm")), (where, mib)
         assert err != 0, (where, mib, err)
+
+
+@pytest.mark.skipif(
+    cgroup_support() is None and os.getuid() == 0,
+    reason="neither a writable control group nor RLIMIT_NPROC (not enforced for root) here",
+)
+def test_a_fork_bomb_stops_at_the_process_cap_and_leaves_no_group(tmp_path: Path) -> None:
+    """The confined tree holds at most PIDS_MAX tasks (its control group's ``pids.max``; or,
+    for an ordinary user without one, RLIMIT_NPROC), and its groups are gone afterwards."""
+    before = _agent_groups()
+    out = probe(
+        tmp_path / "agents" / "forker",
+        """
+        import os, time
+        n, err = 0, 0
+        try:
+            for _ in range(2000):
+                if os.fork() == 0:
+                    time.sleep(120)
+                    os._exit(0)
+                n += 1
+        except OSError as e:
+            err = e.errno
+        out["forked"], out["errno"] = n, err
+        """,
+    )
+    assert out["errno"] == errno.EAGAIN and int(cast(int, out["forked"])) < PIDS_MAX, out
+    assert _agent_groups() == before  # removed with the tree
+
+
+@pytest.mark.skipif(cgroup_support() is None, reason="no writable memory control group here")
+def test_processes_that_each_fit_their_limit_cannot_exceed_the_trees_memory(tmp_path: Path) -> None:
+    """RLIMIT_AS caps each process (2048 MiB in the probe); the control group caps the tree
+    at that plus the tmpfs budget: six children touching 600 MiB each do not all survive."""
+    out = probe(
+        tmp_path / "agents" / "hog",
+        """
+        import os, signal
+        kids = []
+        for _ in range(6):
+            pid = os.fork()
+            if pid == 0:
+                block = bytearray(600 * 2**20)
+                for i in range(0, len(block), 4096):
+                    block[i] = 1
+                os.read(os.open("/dev/null", os.O_RDONLY), 1)  # hold it until killed
+                import time
+                time.sleep(60)
+                os._exit(0)
+            kids.append(pid)
+        import time
+        time.sleep(5)
+        killed = 0
+        for pid in kids:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            killed += done != 0 and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
+        out["killed"] = killed
+        """,
+    )
+    assert int(cast(int, out["killed"])) >= 2, out
+
+
+def _agent_groups() -> set[str]:
+    """The control groups of the agents this process confined that exist now (see
+    sandbox.make_cgroup; other test workers' are theirs)."""
+    mine = f"{CGROUP_PREFIX}{os.getpid()}-"
+    found: set[str] = set()
+    for parent in (Path("/sys/fs/cgroup/pids"), Path("/sys/fs/cgroup/unified")):
+        if parent.is_dir():
+            found |= {str(p) for p in parent.rglob(f"{mine}*")}
+    return found
 
 
 def test_no_user_namespace_no_unshare_unprivileged_uid(tmp_path: Path) -> None:
