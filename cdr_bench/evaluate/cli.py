@@ -118,24 +118,26 @@ def register(sub: Any) -> None:
     r.set_defaults(func=_report)
 
 
+_TIME_LIMITS = {
+    "--decision-timeout": "one decision call, enforced from outside the agent's process (10 s)",
+    "--load-timeout": "importing and constructing the agent (300 s)",
+}
+"""The time limits of the agent's process, by flag: what each bounds (the flag's help, after
+``time limit of``); both are seconds in (0, MAX_TIMEOUT_S]."""
+
+
 def add_agent_args(p: argparse.ArgumentParser) -> None:
     """The options of the agent's process (shared by every command that runs an agent)."""
     from cdr_bench.evaluate.remote import MAX_TIMEOUT_S
 
-    p.add_argument(
-        "--decision-timeout",
-        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
-        default=None,
-        metavar="SECONDS",
-        help="time limit of one decision call, enforced from outside the agent's process (10 s)",
-    )
-    p.add_argument(
-        "--load-timeout",
-        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
-        default=None,
-        metavar="SECONDS",
-        help="time limit of importing and constructing the agent (300 s)",
-    )
+    for flag, what in _TIME_LIMITS.items():
+        p.add_argument(
+            flag,
+            type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
+            default=None,
+            metavar="SECONDS",
+            help=f"time limit of {what}",
+        )
     p.add_argument(
         "--sandbox",
         action="store_true",
