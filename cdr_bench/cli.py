@@ -32,6 +32,8 @@ _SUBCOMMAND_MODULES = (
 
 def register(sub: Any) -> None:
     """The scenario and render subcommands."""
+    from cdr_bench.evaluate.cli import add_agent_args, add_base_seed_arg, add_episodes_arg
+
     sc = sub.add_parser("scenarios", help="list, show and validate scenarios")
     sc_sub = sc.add_subparsers(dest="scenarios_cmd", required=True)
     p = sc_sub.add_parser("list", help="list the shipped scenarios")
@@ -50,12 +52,7 @@ def register(sub: Any) -> None:
         "per episode, the MVP resolver solves 30-90 %% (docs/model.md §8.3)",
     )
     p.add_argument("name", help="registry name or YAML path")
-    p.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=1000,
-        help="episodes for holding and the agent (1000)",
-    )
+    add_episodes_arg(p, 1000, "episodes for holding and the agent (1000)")
     p.add_argument(
         "--search-episodes",
         type=ranged(int, 0, MAX_EPISODES),
@@ -67,12 +64,7 @@ def register(sub: Any) -> None:
         default="agents/mvp",
         help="the reference resolver, run in this process (trusted code only; 'none' skips it)",
     )
-    p.add_argument(
-        "--seed",
-        type=ranged(int, 0, MAX_SEED),
-        default=0,
-        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
-    )
+    add_base_seed_arg(p)
     p.add_argument(
         "--enough",
         type=ranged(int, 1, 5),
@@ -108,8 +100,6 @@ def register(sub: Any) -> None:
         help="show this many km around the ownship (default: the encounter in tactical "
         "scenarios, the whole sector otherwise; inf: the whole sector)",
     )
-    from cdr_bench.evaluate.cli import add_agent_args
-
     add_agent_args(r)
     r.set_defaults(func=_render)
 

@@ -17,9 +17,14 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.actions import HOLD, decode
-from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_STEPS, int_list, ranged
+from cdr_bench.checks import MAX_BATCH_SIZE, MAX_STEPS, int_list, ranged
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.cli import add_agent_args, agent_options
+from cdr_bench.evaluate.cli import (
+    add_agent_args,
+    add_base_seed_arg,
+    add_episodes_arg,
+    agent_options,
+)
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
 from cdr_bench.evaluate.results import atomic_write_text, check_output_path
 from cdr_bench.evaluate.rollout import Decisions, fly
@@ -38,11 +43,10 @@ def register(sub: Any) -> None:
     )
     mm.add_argument("agent", help="agent directory or agent.py")
     mm.add_argument("--scenario", default="tactical/head-on")
-    mm.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=DEFAULT_EPISODES,
-        help=f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
+    add_episodes_arg(
+        mm,
+        DEFAULT_EPISODES,
+        f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
     )
     mm.add_argument(
         "--samples",
@@ -50,12 +54,7 @@ def register(sub: Any) -> None:
         default=DEFAULT_SAMPLES,
         help=f"samples per episode ({DEFAULT_SAMPLES})",
     )
-    mm.add_argument(
-        "--seed",
-        type=ranged(int, 0, MAX_SEED),
-        default=0,
-        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
-    )
+    add_base_seed_arg(mm)
     mm.add_argument(
         "--search",
         action="store_true",

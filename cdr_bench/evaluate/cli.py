@@ -37,12 +37,7 @@ def register(sub: Any) -> None:
         help="registry name or YAML path (repeatable); replaces the default suite",
     )
     p.add_argument("--suite", default=None, help="named suite: paper (the default)")
-    p.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=None,
-        help=f"episodes per scenario (1000; at most {MAX_EPISODES})",
-    )
+    add_episodes_arg(p, None, f"episodes per scenario (1000; at most {MAX_EPISODES})")
     p.add_argument(
         "--split",
         choices=tuple(SPLITS),
@@ -144,6 +139,23 @@ def add_agent_args(p: argparse.ArgumentParser) -> None:
         help="confine the agent's process with bubblewrap: read-only view of the current "
         "folder, private scratch, no network, CPU and memory limits (for agents you do not "
         "trust; the agent always runs in its own process)",
+    )
+
+
+def add_episodes_arg(p: argparse.ArgumentParser, default: int | None, help: str) -> None:
+    """``--episodes``: episodes per scenario, 1 to :data:`~cdr_bench.checks.MAX_EPISODES` (every
+    command that runs or checks episodes; ``help`` says what they are and the default)."""
+    p.add_argument("--episodes", type=ranged(int, 1, MAX_EPISODES), default=default, help=help)
+
+
+def add_base_seed_arg(p: argparse.ArgumentParser) -> None:
+    """``--seed``: the base seed of the episodes a scenario check or an analysis runs (0, the
+    seeds of the split validation-0, unless given)."""
+    p.add_argument(
+        "--seed",
+        type=ranged(int, 0, MAX_SEED),
+        default=0,
+        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
     )
 
 

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
+from cdr_bench.checks import MAX_SEED, MAX_WORKERS, ranged
+from cdr_bench.evaluate.cli import add_episodes_arg
 from cdr_bench.evaluate.sandbox import Limits
 
 MAX_CPU_S = 30 * 86400
@@ -46,13 +47,12 @@ def register(sub: Any) -> None:
         help="replay every committed episode, re-run each agent on a random sample, re-render "
         "and compare with the committed leaderboard; writes nothing",
     )
-    b.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=None,
-        help="episodes per scenario (--evaluate: 1000 = the paper's; named submissions: the "
-        "committed count; --check: the committed count, or a smaller multiple of 200 to check "
-        "the first episodes only)",
+    add_episodes_arg(
+        b,
+        None,
+        "episodes per scenario (--evaluate: 1000 = the paper's; named submissions: the committed "
+        "count; --check: the committed count, or a smaller multiple of 200 to check the first "
+        "episodes only)",
     )
     b.add_argument(
         "--all-seeds",
