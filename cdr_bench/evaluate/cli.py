@@ -29,13 +29,7 @@ def register(sub: Any) -> None:
         help="agent .py file, a folder holding agent.py, or a built-in reference agent: "
         "direct, mvp, random (used when no such file or folder is here)",
     )
-    p.add_argument(
-        "--scenario",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="registry name or YAML path (repeatable); replaces the default suite",
-    )
+    _add_scenarios_arg(p, "registry name or YAML path (repeatable); replaces the default suite")
     p.add_argument("--suite", default=None, help="named suite: paper (the default)")
     add_episodes_arg(p, None, f"episodes per scenario (1000; at most {MAX_EPISODES})")
     p.add_argument(
@@ -89,12 +83,8 @@ def register(sub: Any) -> None:
     c = sub.add_parser("compare", help="paired comparison of two results on the same episodes")
     c.add_argument("result_a")
     c.add_argument("result_b")
-    c.add_argument(
-        "--scenario",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="compare on these scenarios only (repeatable; default: every scenario both hold)",
+    _add_scenarios_arg(
+        c, "compare on these scenarios only (repeatable; default: every scenario both hold)"
     )
     c.add_argument("--json", default=None, help="also write the comparison as JSON here")
     c.set_defaults(func=_compare)
@@ -111,6 +101,12 @@ def register(sub: Any) -> None:
     r.add_argument("results", nargs="+", help="result JSON files")
     r.add_argument("--out", default=None, help="write here instead of printing")
     r.set_defaults(func=_report)
+
+
+def _add_scenarios_arg(p: argparse.ArgumentParser, help: str) -> None:
+    """``--scenario NAME``, repeatable: the scenarios the command runs or reads (none given: an
+    empty list, the command's default set)."""
+    p.add_argument("--scenario", action="append", default=[], metavar="NAME", help=help)
 
 
 _TIME_LIMITS = {
