@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_STEPS, ranged
+from cdr_bench.checks import MAX_SEED, ranged
 from cdr_bench.errors import UserError
 
 # Modules that add subcommands; a module missing from an install is skipped.
@@ -32,7 +32,12 @@ _SUBCOMMAND_MODULES = (
 
 def register(sub: Any) -> None:
     """The scenario and render subcommands."""
-    from cdr_bench.evaluate.cli import add_agent_args, add_base_seed_arg, add_episodes_arg
+    from cdr_bench.evaluate.cli import (
+        add_agent_args,
+        add_base_seed_arg,
+        add_count_arg,
+        add_episodes_arg,
+    )
 
     sc = sub.add_parser("scenarios", help="list, show and validate scenarios")
     sc_sub = sc.add_subparsers(dest="scenarios_cmd", required=True)
@@ -53,11 +58,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument("name", help="registry name or YAML path")
     add_episodes_arg(p, 1000, "episodes for holding and the agent (1000)")
-    p.add_argument(
-        "--search-episodes",
-        type=ranged(int, 0, MAX_EPISODES),
-        default=200,
-        help="episodes searched for manoeuvre families (200; the first of the same episodes)",
+    add_episodes_arg(
+        p,
+        200,
+        "episodes searched for manoeuvre families (200; the first of the same episodes)",
+        flag="--search-episodes",
+        least=0,
     )
     p.add_argument(
         "--agent",
@@ -84,12 +90,7 @@ def register(sub: Any) -> None:
         help="agent file (default: every aircraft holds course, speed and level)",
     )
     r.add_argument("--seed", type=ranged(int, 0, MAX_SEED), default=0, help="episode seed (0)")
-    r.add_argument(
-        "--max-frames",
-        type=ranged(int, 1, MAX_STEPS),
-        default=400,
-        help="stop after this many frames (400)",
-    )
+    add_count_arg(r, "--max-frames", 1, 400, "stop after this many frames (400)")
     r.add_argument(
         "--fps", type=ranged(int, 1, 100), default=8, help="frames per second, 1 to 100 (8)"
     )

@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.actions import HOLD, decode
-from cdr_bench.checks import MAX_BATCH_SIZE, MAX_STEPS, int_list, ranged
+from cdr_bench.checks import MAX_BATCH_SIZE, int_list, ranged
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.cli import (
     add_agent_args,
     add_base_seed_arg,
+    add_count_arg,
     add_episodes_arg,
     agent_options,
 )
@@ -60,11 +61,12 @@ def register(sub: Any) -> None:
         action="store_true",
         help="also search each episode's feasible manoeuvre families (docs/model.md §8.3)",
     )
-    mm.add_argument(
+    add_count_arg(
+        mm,
         "--max-steps",
-        type=ranged(int, 0, MAX_STEPS),
-        default=0,
-        help="cut follow-on rollouts after this many steps (a failure); 0 = horizon",
+        0,
+        0,
+        "cut follow-on rollouts after this many steps (a failure); 0 = horizon",
     )
     mm.add_argument(
         "--threshold",
@@ -84,21 +86,15 @@ def register(sub: Any) -> None:
         default=[1, 8, 64, 256],
         help=f"comma-separated batch sizes, each 1 to {MAX_BATCH_SIZE} (1,8,64,256)",
     )
-    la.add_argument(
+    add_count_arg(
+        la,
         "--decisions",
-        type=ranged(int, 1, MAX_STEPS),
-        default=1000,
-        help="decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
+        1,
+        1000,
+        "decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
     )
-    la.add_argument(
-        "--min-calls",
-        type=ranged(int, 1, MAX_STEPS),
-        default=20,
-        help="timed calls per batch size (>=)",
-    )
-    la.add_argument(
-        "--warmup", type=ranged(int, 0, MAX_STEPS), default=20, help="untimed calls before timing"
-    )
+    add_count_arg(la, "--min-calls", 1, 20, "timed calls per batch size (>=)")
+    add_count_arg(la, "--warmup", 0, 20, "untimed calls before timing")
     la.add_argument("--scenario", default="medium")
     la.add_argument(
         "--threads",

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
+from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_STEPS, MAX_WORKERS, ranged
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.seeds import SPLITS, VALIDATION
 
@@ -47,12 +47,7 @@ def register(sub: Any) -> None:
         help="base seed of the episode seeds, instead of --split",
     )
     p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
-    p.add_argument(
-        "--workers",
-        type=ranged(int, 1, MAX_WORKERS),
-        default=1,
-        help="processes running batches (1)",
-    )
+    add_workers_arg(p, 1, "processes running batches (1)")
     p.add_argument(
         "--backend",
         choices=("local", "ray"),
@@ -138,10 +133,32 @@ def add_agent_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def add_episodes_arg(p: argparse.ArgumentParser, default: int | None, help: str) -> None:
-    """``--episodes``: episodes per scenario, 1 to :data:`~cdr_bench.checks.MAX_EPISODES` (every
-    command that runs or checks episodes; ``help`` says what they are and the default)."""
-    p.add_argument("--episodes", type=ranged(int, 1, MAX_EPISODES), default=default, help=help)
+def add_episodes_arg(
+    p: argparse.ArgumentParser,
+    default: int | None,
+    help: str,
+    *,
+    flag: str = "--episodes",
+    least: int = 1,
+) -> None:
+    """An episode count (``--episodes`` unless ``flag`` says otherwise), ``least`` to
+    :data:`~cdr_bench.checks.MAX_EPISODES`: every command that runs or checks episodes; ``help``
+    says what they are and the default."""
+    p.add_argument(flag, type=ranged(int, least, MAX_EPISODES), default=default, help=help)
+
+
+def add_count_arg(
+    p: argparse.ArgumentParser, flag: str, least: int, default: int, help: str
+) -> None:
+    """A count of steps, frames or agent calls, ``least`` to :data:`~cdr_bench.checks.MAX_STEPS`
+    (the flags that bound or time a run)."""
+    p.add_argument(flag, type=ranged(int, least, MAX_STEPS), default=default, help=help)
+
+
+def add_workers_arg(p: argparse.ArgumentParser, default: int, help: str) -> None:
+    """``--workers``: the processes that run episodes, 1 to
+    :data:`~cdr_bench.checks.MAX_WORKERS`."""
+    p.add_argument("--workers", type=ranged(int, 1, MAX_WORKERS), default=default, help=help)
 
 
 def add_base_seed_arg(p: argparse.ArgumentParser) -> None:

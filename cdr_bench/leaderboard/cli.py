@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_SEED, MAX_WORKERS, ranged
-from cdr_bench.evaluate.cli import add_episodes_arg
+from cdr_bench.checks import MAX_SEED, ranged
+from cdr_bench.evaluate.cli import add_episodes_arg, add_workers_arg
 from cdr_bench.evaluate.sandbox import Limits
 
 MAX_CPU_S = 30 * 86400
@@ -82,9 +82,7 @@ def register(sub: Any) -> None:
         "which each entry's agent flies and must match its committed score (Fisher's exact "
         "test, p < 1e-4 fails; 0: no such test) (200)",
     )
-    b.add_argument(
-        "--workers", type=ranged(int, 1, MAX_WORKERS), default=2, help="evaluation processes (2)"
-    )
+    add_workers_arg(b, 2, "evaluation processes (2)")
     b.add_argument(
         "--cpu-limit",
         type=ranged(int, 1, MAX_CPU_S),
