@@ -18,21 +18,17 @@ from cdr_bench.scenarios import ScenarioConfig, ScenarioError, list_scenarios, l
 
 __version__ = "0.3.0"
 
+_DENSITIES = ("low", "medium", "high")
+_ENCOUNTERS = (("HeadOn", "head-on"), ("Crossing", "crossing"), ("Overtaking", "overtaking"))
+"""The density scenarios and the tactical families with their ids' stems (``HeadOn``)."""
+
 GYMNASIUM_TASKS: list[tuple[str, dict[str, Any], int | None]] = [
     ("cdr_bench/Ownship-v0", {}, None),  # any scenario: make(..., scenario="high")
-    ("cdr_bench/Low-v0", {"scenario": "low"}, 1000),
-    ("cdr_bench/Medium-v0", {"scenario": "medium"}, 1000),
-    ("cdr_bench/High-v0", {"scenario": "high"}, 1000),
-    ("cdr_bench/HeadOn-v1", {"scenario": "tactical/head-on"}, 60),
-    ("cdr_bench/Crossing-v1", {"scenario": "tactical/crossing"}, 60),
-    ("cdr_bench/Overtaking-v1", {"scenario": "tactical/overtaking"}, 60),
-    ("cdr_bench/HeadOnFixed-v0", {"scenario": "tactical/head-on-fixed"}, 60),
-    ("cdr_bench/CrossingFixed-v0", {"scenario": "tactical/crossing-fixed"}, 60),
-    ("cdr_bench/OvertakingFixed-v0", {"scenario": "tactical/overtaking-fixed"}, 60),
+    *((f"cdr_bench/{d.capitalize()}-v0", {"scenario": d}, 1000) for d in _DENSITIES),
+    *((f"cdr_bench/{i}-v1", {"scenario": f"tactical/{s}"}, 60) for i, s in _ENCOUNTERS),
+    *((f"cdr_bench/{i}Fixed-v0", {"scenario": f"tactical/{s}-fixed"}, 60) for i, s in _ENCOUNTERS),
     # The tactical ids' version 0 was the fixed encounter: it stays what it was.
-    ("cdr_bench/HeadOn-v0", {"scenario": "tactical/head-on-fixed"}, 60),
-    ("cdr_bench/Crossing-v0", {"scenario": "tactical/crossing-fixed"}, 60),
-    ("cdr_bench/Overtaking-v0", {"scenario": "tactical/overtaking-fixed"}, 60),
+    *((f"cdr_bench/{i}-v0", {"scenario": f"tactical/{s}-fixed"}, 60) for i, s in _ENCOUNTERS),
     *(
         (f"cdr_bench/CurriculumStage{i:02d}-v0", {"scenario": f"curriculum/stage-{i:02d}"}, 1000)
         for i in range(1, 13)

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_STEPS, ranged
+from cdr_bench.checks import MAX_SEED, ranged
 from cdr_bench.errors import UserError
 
 # Modules that add subcommands; a module missing from an install is skipped.
@@ -32,6 +32,13 @@ _SUBCOMMAND_MODULES = (
 
 def register(sub: Any) -> None:
     """The scenario and render subcommands."""
+    from cdr_bench.evaluate.cli import (
+        add_agent_args,
+        add_base_seed_arg,
+        add_count_arg,
+        add_episodes_arg,
+    )
+
     sc = sub.add_parser("scenarios", help="list, show and validate scenarios")
     sc_sub = sc.add_subparsers(dest="scenarios_cmd", required=True)
     p = sc_sub.add_parser("list", help="list the shipped scenarios")
@@ -50,29 +57,20 @@ def register(sub: Any) -> None:
         "per episode, the MVP resolver solves 30-90 %% (docs/model.md §8.3)",
     )
     p.add_argument("name", help="registry name or YAML path")
-    p.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=1000,
-        help="episodes for holding and the agent (1000)",
-    )
-    p.add_argument(
-        "--search-episodes",
-        type=ranged(int, 0, MAX_EPISODES),
-        default=200,
-        help="episodes searched for manoeuvre families (200; the first of the same episodes)",
+    add_episodes_arg(p, 1000, "episodes for holding and the agent (1000)")
+    add_episodes_arg(
+        p,
+        200,
+        "episodes searched for manoeuvre families (200; the first of the same episodes)",
+        flag="--search-episodes",
+        least=0,
     )
     p.add_argument(
         "--agent",
         default="agents/mvp",
         help="the reference resolver, run in this process (trusted code only; 'none' skips it)",
     )
-    p.add_argument(
-        "--seed",
-        type=ranged(int, 0, MAX_SEED),
-        default=0,
-        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
-    )
+    add_base_seed_arg(p)
     p.add_argument(
         "--enough",
         type=ranged(int, 1, 5),
@@ -92,12 +90,7 @@ def register(sub: Any) -> None:
         help="agent file (default: every aircraft holds course, speed and level)",
     )
     r.add_argument("--seed", type=ranged(int, 0, MAX_SEED), default=0, help="episode seed (0)")
-    r.add_argument(
-        "--max-frames",
-        type=ranged(int, 1, MAX_STEPS),
-        default=400,
-        help="stop after this many frames (400)",
-    )
+    add_count_arg(r, "--max-frames", 1, 400, "stop after this many frames (400)")
     r.add_argument(
         "--fps", type=ranged(int, 1, 100), default=8, help="frames per second, 1 to 100 (8)"
     )
@@ -108,8 +101,6 @@ def register(sub: Any) -> None:
         help="show this many km around the ownship (default: the encounter in tactical "
         "scenarios, the whole sector otherwise; inf: the whole sector)",
     )
-    from cdr_bench.evaluate.cli import add_agent_args
-
     add_agent_args(r)
     r.set_defaults(func=_render)
 

@@ -367,15 +367,12 @@ def _tanh_rows(x):  # pragma: no cover - compiled
     size = flat.shape[0]
     b = np.empty(_CHUNK)
     o = np.empty(_CHUNK)
-    t1 = np.empty(_CHUNK)
-    t2 = np.empty(_CHUNK)
-    t3 = np.empty(_CHUNK)
-    t4 = np.empty(_CHUNK)
+    t = np.empty((4, _CHUNK))  # _vtanh's scratch
     for s in range(0, size, _CHUNK):
         m = min(_CHUNK, size - s)
         for j in range(m):
             b[j] = flat[s + j]
-        _vtanh(b, o, t1, t2, t3, t4, m)
+        _vtanh(b, o, t[0], t[1], t[2], t[3], m)
         for j in range(m):
             flat[s + j] = o[j]
 
@@ -410,29 +407,41 @@ def _mlp(x, ws, bs, acts):  # pragma: no cover - compiled
     return h
 
 
+@njit(inline="always", **_JIT)
+def _row_max(v, mask, use_mask, n):  # pragma: no cover - compiled
+    """Row ``n`` over its feasible entries (all if not ``use_mask``): ``(arg, best, nan)``, the
+    first index of the largest value (that of the first NaN if any: a NaN counts as largest; 0
+    for an all-masked row), the largest value that is not NaN (-inf if none) and whether a NaN
+    is there. One scan in index order, comparisons only."""
+    best = -math.inf
+    arg = 0
+    found = False
+    nan = False
+    for a in range(v.shape[1]):
+        if use_mask and not mask[n, a]:
+            continue
+        x = v[n, a]
+        if x != x:
+            if not nan:
+                arg = a
+            nan = True
+        elif not found or x > best:
+            best = x
+            if not nan:
+                arg = a
+            found = True
+    return arg, best, nan
+
+
 @njit(**_JIT)
 def _argmax(v, mask, use_mask):  # pragma: no cover - compiled
     """First index of the largest value per row (over rows' feasible entries if ``use_mask``;
     a NaN counts as largest, an all-masked row gives 0: the semantics of torch.argmax after
     masked_fill(-inf))."""
-    N, A = v.shape
+    N = v.shape[0]
     out = np.zeros(N, np.int64)
     for n in range(N):
-        best = -math.inf
-        arg = 0
-        found = False
-        for a in range(A):
-            if use_mask and not mask[n, a]:
-                continue
-            x = v[n, a]
-            if x != x:
-                arg = a
-                break
-            if not found or x > best:
-                best = x
-                arg = a
-                found = True
-        out[n] = arg
+        out[n] = _row_max(v, mask, use_mask, n)[0]
     return out
 
 
@@ -448,18 +457,9 @@ def _sample(v, mask, use_mask, u):  # pragma: no cover - compiled
     w = np.empty(A)
     tmp = np.empty(A)
     for n in range(N):
-        best = -math.inf
-        bad = False
-        for a in range(A):
-            if use_mask and not mask[n, a]:
-                continue
-            x = v[n, a]
-            if x != x:
-                bad = True
-            elif x > best:
-                best = x
+        arg, best, bad = _row_max(v, mask, use_mask, n)
         if bad or best == -math.inf:
-            out[n] = _argmax(v[n : n + 1], mask[n : n + 1] if use_mask else mask, use_mask)[0]
+            out[n] = arg
             continue
         for a in range(A):
             z[a] = np.float64(v[n, a]) - best

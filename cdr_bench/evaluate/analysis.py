@@ -17,9 +17,15 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.actions import HOLD, decode
-from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_STEPS, int_list, ranged
+from cdr_bench.checks import MAX_BATCH_SIZE, int_list, ranged
 from cdr_bench.errors import UserError
-from cdr_bench.evaluate.cli import add_agent_args, agent_options
+from cdr_bench.evaluate.cli import (
+    add_agent_args,
+    add_base_seed_arg,
+    add_count_arg,
+    add_episodes_arg,
+    agent_options,
+)
 from cdr_bench.evaluate.remote import AgentFault, AgentOptions, RemoteAgent
 from cdr_bench.evaluate.results import atomic_write_text, check_output_path
 from cdr_bench.evaluate.rollout import Decisions, fly
@@ -38,11 +44,10 @@ def register(sub: Any) -> None:
     )
     mm.add_argument("agent", help="agent directory or agent.py")
     mm.add_argument("--scenario", default="tactical/head-on")
-    mm.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=DEFAULT_EPISODES,
-        help=f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
+    add_episodes_arg(
+        mm,
+        DEFAULT_EPISODES,
+        f"episodes of the scenario (the evaluation's first ones; {DEFAULT_EPISODES})",
     )
     mm.add_argument(
         "--samples",
@@ -50,22 +55,18 @@ def register(sub: Any) -> None:
         default=DEFAULT_SAMPLES,
         help=f"samples per episode ({DEFAULT_SAMPLES})",
     )
-    mm.add_argument(
-        "--seed",
-        type=ranged(int, 0, MAX_SEED),
-        default=0,
-        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
-    )
+    add_base_seed_arg(mm)
     mm.add_argument(
         "--search",
         action="store_true",
         help="also search each episode's feasible manoeuvre families (docs/model.md §8.3)",
     )
-    mm.add_argument(
+    add_count_arg(
+        mm,
         "--max-steps",
-        type=ranged(int, 0, MAX_STEPS),
-        default=0,
-        help="cut follow-on rollouts after this many steps (a failure); 0 = horizon",
+        0,
+        0,
+        "cut follow-on rollouts after this many steps (a failure); 0 = horizon",
     )
     mm.add_argument(
         "--threshold",
@@ -85,21 +86,15 @@ def register(sub: Any) -> None:
         default=[1, 8, 64, 256],
         help=f"comma-separated batch sizes, each 1 to {MAX_BATCH_SIZE} (1,8,64,256)",
     )
-    la.add_argument(
+    add_count_arg(
+        la,
         "--decisions",
-        type=ranged(int, 1, MAX_STEPS),
-        default=1000,
-        help="decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
+        1,
+        1000,
+        "decisions timed per batch size (calls = max(--min-calls, decisions / batch))",
     )
-    la.add_argument(
-        "--min-calls",
-        type=ranged(int, 1, MAX_STEPS),
-        default=20,
-        help="timed calls per batch size (>=)",
-    )
-    la.add_argument(
-        "--warmup", type=ranged(int, 0, MAX_STEPS), default=20, help="untimed calls before timing"
-    )
+    add_count_arg(la, "--min-calls", 1, 20, "timed calls per batch size (>=)")
+    add_count_arg(la, "--warmup", 0, 20, "untimed calls before timing")
     la.add_argument("--scenario", default="medium")
     la.add_argument(
         "--threads",

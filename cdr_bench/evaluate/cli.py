@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
+from cdr_bench.checks import MAX_BATCH_SIZE, MAX_EPISODES, MAX_SEED, MAX_STEPS, MAX_WORKERS, ranged
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.seeds import SPLITS, VALIDATION
 
@@ -29,20 +29,9 @@ def register(sub: Any) -> None:
         help="agent .py file, a folder holding agent.py, or a built-in reference agent: "
         "direct, mvp, random (used when no such file or folder is here)",
     )
-    p.add_argument(
-        "--scenario",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="registry name or YAML path (repeatable); replaces the default suite",
-    )
+    _add_scenarios_arg(p, "registry name or YAML path (repeatable); replaces the default suite")
     p.add_argument("--suite", default=None, help="named suite: paper (the default)")
-    p.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=None,
-        help=f"episodes per scenario (1000; at most {MAX_EPISODES})",
-    )
+    add_episodes_arg(p, None, f"episodes per scenario (1000; at most {MAX_EPISODES})")
     p.add_argument(
         "--split",
         choices=tuple(SPLITS),
@@ -58,12 +47,7 @@ def register(sub: Any) -> None:
         help="base seed of the episode seeds, instead of --split",
     )
     p.add_argument("--out", default=None, help="result JSON (results/<agent>/<suite>.json)")
-    p.add_argument(
-        "--workers",
-        type=ranged(int, 1, MAX_WORKERS),
-        default=1,
-        help="processes running batches (1)",
-    )
+    add_workers_arg(p, 1, "processes running batches (1)")
     p.add_argument(
         "--backend",
         choices=("local", "ray"),
@@ -94,12 +78,8 @@ def register(sub: Any) -> None:
     c = sub.add_parser("compare", help="paired comparison of two results on the same episodes")
     c.add_argument("result_a")
     c.add_argument("result_b")
-    c.add_argument(
-        "--scenario",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="compare on these scenarios only (repeatable; default: every scenario both hold)",
+    _add_scenarios_arg(
+        c, "compare on these scenarios only (repeatable; default: every scenario both hold)"
     )
     c.add_argument("--json", default=None, help="also write the comparison as JSON here")
     c.set_defaults(func=_compare)
@@ -118,30 +98,77 @@ def register(sub: Any) -> None:
     r.set_defaults(func=_report)
 
 
+def _add_scenarios_arg(p: argparse.ArgumentParser, help: str) -> None:
+    """``--scenario NAME``, repeatable: the scenarios the command runs or reads (none given: an
+    empty list, the command's default set)."""
+    p.add_argument("--scenario", action="append", default=[], metavar="NAME", help=help)
+
+
+_TIME_LIMITS = {
+    "--decision-timeout": "one decision call, enforced from outside the agent's process (10 s)",
+    "--load-timeout": "importing and constructing the agent (300 s)",
+}
+"""The time limits of the agent's process, by flag: what each bounds (the flag's help, after
+``time limit of``); both are seconds in (0, MAX_TIMEOUT_S]."""
+
+
 def add_agent_args(p: argparse.ArgumentParser) -> None:
     """The options of the agent's process (shared by every command that runs an agent)."""
     from cdr_bench.evaluate.remote import MAX_TIMEOUT_S
 
-    p.add_argument(
-        "--decision-timeout",
-        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
-        default=None,
-        metavar="SECONDS",
-        help="time limit of one decision call, enforced from outside the agent's process (10 s)",
-    )
-    p.add_argument(
-        "--load-timeout",
-        type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
-        default=None,
-        metavar="SECONDS",
-        help="time limit of importing and constructing the agent (300 s)",
-    )
+    for flag, what in _TIME_LIMITS.items():
+        p.add_argument(
+            flag,
+            type=ranged(float, 0, MAX_TIMEOUT_S, low_in=False),
+            default=None,
+            metavar="SECONDS",
+            help=f"time limit of {what}",
+        )
     p.add_argument(
         "--sandbox",
         action="store_true",
         help="confine the agent's process with bubblewrap: read-only view of the current "
         "folder, private scratch, no network, CPU and memory limits (for agents you do not "
         "trust; the agent always runs in its own process)",
+    )
+
+
+def add_episodes_arg(
+    p: argparse.ArgumentParser,
+    default: int | None,
+    help: str,
+    *,
+    flag: str = "--episodes",
+    least: int = 1,
+) -> None:
+    """An episode count (``--episodes`` unless ``flag`` says otherwise), ``least`` to
+    :data:`~cdr_bench.checks.MAX_EPISODES`: every command that runs or checks episodes; ``help``
+    says what they are and the default."""
+    p.add_argument(flag, type=ranged(int, least, MAX_EPISODES), default=default, help=help)
+
+
+def add_count_arg(
+    p: argparse.ArgumentParser, flag: str, least: int, default: int, help: str
+) -> None:
+    """A count of steps, frames or agent calls, ``least`` to :data:`~cdr_bench.checks.MAX_STEPS`
+    (the flags that bound or time a run)."""
+    p.add_argument(flag, type=ranged(int, least, MAX_STEPS), default=default, help=help)
+
+
+def add_workers_arg(p: argparse.ArgumentParser, default: int, help: str) -> None:
+    """``--workers``: the processes that run episodes, 1 to
+    :data:`~cdr_bench.checks.MAX_WORKERS`."""
+    p.add_argument("--workers", type=ranged(int, 1, MAX_WORKERS), default=default, help=help)
+
+
+def add_base_seed_arg(p: argparse.ArgumentParser) -> None:
+    """``--seed``: the base seed of the episodes a scenario check or an analysis runs (0, the
+    seeds of the split validation-0, unless given)."""
+    p.add_argument(
+        "--seed",
+        type=ranged(int, 0, MAX_SEED),
+        default=0,
+        help="base seed of the episodes (0: validation-0; 1: validation; 20261127: test)",
     )
 
 

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from cdr_bench.checks import MAX_EPISODES, MAX_SEED, MAX_WORKERS, ranged
+from cdr_bench.checks import MAX_SEED, ranged
+from cdr_bench.evaluate.cli import add_episodes_arg, add_workers_arg
 from cdr_bench.evaluate.sandbox import Limits
 
 MAX_CPU_S = 30 * 86400
@@ -46,13 +47,12 @@ def register(sub: Any) -> None:
         help="replay every committed episode, re-run each agent on a random sample, re-render "
         "and compare with the committed leaderboard; writes nothing",
     )
-    b.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=None,
-        help="episodes per scenario (--evaluate: 1000 = the paper's; named submissions: the "
-        "committed count; --check: the committed count, or a smaller multiple of 200 to check "
-        "the first episodes only)",
+    add_episodes_arg(
+        b,
+        None,
+        "episodes per scenario (--evaluate: 1000 = the paper's; named submissions: the committed "
+        "count; --check: the committed count, or a smaller multiple of 200 to check the first "
+        "episodes only)",
     )
     b.add_argument(
         "--all-seeds",
@@ -82,9 +82,7 @@ def register(sub: Any) -> None:
         "which each entry's agent flies and must match its committed score (Fisher's exact "
         "test, p < 1e-4 fails; 0: no such test) (200)",
     )
-    b.add_argument(
-        "--workers", type=ranged(int, 1, MAX_WORKERS), default=2, help="evaluation processes (2)"
-    )
+    add_workers_arg(b, 2, "evaluation processes (2)")
     b.add_argument(
         "--cpu-limit",
         type=ranged(int, 1, MAX_CPU_S),

@@ -4,7 +4,8 @@ Pure numpy (no torch, no SB3): the trainer modules import this at module level, 
 ``cdr-bench`` parser must stay torch-free.
 
 * :class:`TrainArgs` -- the flags of every trainer, CleanRL style: one dataclass field per flag,
-  the docstring under it is the help (:func:`add_arguments`, :func:`from_namespace`);
+  the docstring under it is the help (:func:`add_arguments`, :func:`from_namespace`); those of
+  every run, whatever its algorithm (also IPPO/MAPPO's), are its base :class:`RunArgs`;
 * :func:`training_env` -- the :class:`~cdr_bench.rl.curriculum.CurriculumEnv` the flags describe;
 * :class:`RunLog` -- the run directory's ``args.json`` and ``log.jsonl``, the progress bar, the
   wall-time limit and the learning curve. Log keys have fixed prefixes: ``charts/`` (rollout
@@ -48,7 +49,12 @@ aircraft hold)."""
 
 
 @dataclass
-class TrainArgs:
+class RunArgs:
+    """The flags of every training run, whatever its algorithm: where it writes, its seed,
+    budget, wall-time limit and threads, and whether it resumes. A trainer's Args extends it
+    (:class:`TrainArgs`, or :class:`cdr_bench.rl.mappo.Args` directly), redeclaring a field whose
+    default or help differs."""
+
     run_dir: str = "runs/train"
     """directory for logs, checkpoints and the curve"""
     seed: int = 1
@@ -62,6 +68,10 @@ class TrainArgs:
     and the simulator single-threaded, so more threads mostly contend)"""
     resume: bool = False
     """continue exactly from the state saved in run_dir"""
+
+
+@dataclass
+class TrainArgs(RunArgs):
     n_envs: int = 32
     """parallel episodes in the batched simulator"""
     device: str = "cpu"

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.rl import common
-from cdr_bench.rl.common import OUTCOME_CHARTS, from_namespace
+from cdr_bench.rl.common import OUTCOME_CHARTS, RunArgs, from_namespace
 
 # torch is imported inside run(): building the cdr-bench parser must not import it.
 
@@ -52,15 +52,11 @@ NAMES = ("ippo", "mappo")
 
 
 @dataclass
-class Args:
+class Args(RunArgs):
     run_dir: str = "runs/mappo"
     """directory for args.json, log.jsonl and checkpoint.pt"""
-    seed: int = 1
-    """seed of torch, numpy and the episode-seed stream"""
     total_steps: int = 2_500_000
     """budget in aircraft transitions (one flying aircraft, one step)"""
-    max_wall_minutes: float = 0.0
-    """stop (and finish normally) after this wall time; 0 = no limit"""
     threads: int = 1
     """torch intra-op threads"""
     resume: bool = False

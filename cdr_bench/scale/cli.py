@@ -7,7 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import cdr_bench.scale.ray_eval  # noqa: F401  (registers the evaluator's "ray" backend)
-from cdr_bench.checks import MAX_EPISODES, ranged
+from cdr_bench.checks import ranged
+from cdr_bench.evaluate.cli import add_episodes_arg
 
 MAX_TOTAL_STEPS = 10**10
 """Largest ``--total-steps`` of a sweep (the longest shipped recipe trains 3e6 steps)."""
@@ -38,12 +39,7 @@ def register(sub: Any) -> None:
         default=None,
         help="replace budget.total_steps (reduced run)",
     )
-    p.add_argument(
-        "--episodes",
-        type=ranged(int, 1, MAX_EPISODES),
-        default=None,
-        help="replace evaluation.episodes (reduced run)",
-    )
+    add_episodes_arg(p, None, "replace evaluation.episodes (reduced run)")
     p.add_argument("--seeds", default=None, help="replace seeds: comma-separated, e.g. 1,2")
     p.add_argument(
         "--scenario",

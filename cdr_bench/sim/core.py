@@ -25,6 +25,7 @@ the spawn level is within ``spawn_clearance_km``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -120,6 +121,47 @@ class StepResult:
     def safety_reward(self) -> NDArray[np.float64]:
         """(E, M) safety part R_S of the step."""
         return self.terms[..., 5] + self.terms[..., 6]
+
+
+def _placed_aircraft(cfg: ScenarioConfig) -> dict[str, NDArray[Any]]:
+    """The kernels' tables of the scenario's placed aircraft (the ``x_*`` fields of
+    :class:`~cdr_bench.sim.kernels.Constants`), one row each: position, heading vector, speed
+    (km/s) and level of a fixed one; the ranges and levels of one placed by an encounter with
+    the ownship."""
+    X = len(cfg.aircraft)
+    x_pos = np.zeros((X, 2))
+    x_dir = np.zeros((X, 2))
+    x_speed = np.zeros(X)
+    x_level = np.zeros(X, dtype=np.int64)
+    x_enc = np.zeros((X, k.N_ENC_PARAMS))
+    x_enc_level = np.zeros((X, 4), dtype=np.int64)
+    for i, a in enumerate(cfg.aircraft):
+        enc = a.encounter
+        if enc is None:  # fixed (the schema requires every value)
+            assert a.position_km is not None and a.heading_deg is not None
+            assert a.speed_kt is not None and a.level is not None
+            x_pos[i] = a.position_km
+            x_dir[i] = exact_unit_vector(a.heading_deg)
+            x_speed[i] = a.speed_kt * KM_PER_S_PER_KT
+            x_level[i] = a.level
+            continue
+        x_enc[i, k.X_HAS] = 1.0
+        x_enc[i, k.X_T_LO], x_enc[i, k.X_T_HI] = range_bounds(enc.time_to_cpa_s)
+        x_enc[i, k.X_A_LO], x_enc[i, k.X_A_HI] = range_bounds(enc.angle_deg)
+        x_enc[i, k.X_M_LO], x_enc[i, k.X_M_HI] = range_bounds(enc.miss_km)
+        x_enc[i, k.X_S_LO], x_enc[i, k.X_S_HI] = range_bounds(enc.speed_kt)
+        x_enc[i, k.X_MIRROR] = float(enc.mirror)
+        levels = enc.level if isinstance(enc.level, tuple) else (enc.level,)
+        x_enc_level[i, 0] = len(levels)
+        x_enc_level[i, 1 : 1 + len(levels)] = levels
+    return {
+        "x_pos": x_pos,
+        "x_dir": x_dir,
+        "x_speed": x_speed,
+        "x_level": x_level,
+        "x_enc": x_enc,
+        "x_enc_level": x_enc_level,
+    }
 
 
 class Simulator:
@@ -221,7 +263,6 @@ class Simulator:
         self.params = fp
         """Float parameters of the kernels (read-only; indices ``P_*`` of the kernels module)."""
 
-        X = self.X
         li = cfg.learning_intruders
         L = len(li)
         li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(L, 2)
@@ -237,31 +278,6 @@ class Simulator:
             own[k.O_SPEED] = o.start.speed_kt
             own[k.O_LEVEL] = o.start.level
             own[k.O_GOAL_X], own[k.O_GOAL_Y] = o.goal_km
-        x_pos = np.zeros((X, 2))
-        x_dir = np.zeros((X, 2))
-        x_speed = np.zeros(X)
-        x_level = np.zeros(X, dtype=np.int64)
-        x_enc = np.zeros((X, k.N_ENC_PARAMS))
-        x_enc_level = np.zeros((X, 4), dtype=np.int64)
-        for i, a in enumerate(cfg.aircraft):
-            enc = a.encounter
-            if enc is None:  # fixed (the schema requires every value)
-                assert a.position_km is not None and a.heading_deg is not None
-                assert a.speed_kt is not None and a.level is not None
-                x_pos[i] = a.position_km
-                x_dir[i] = exact_unit_vector(a.heading_deg)
-                x_speed[i] = a.speed_kt * KM_PER_S_PER_KT
-                x_level[i] = a.level
-                continue
-            x_enc[i, k.X_HAS] = 1.0
-            x_enc[i, k.X_T_LO], x_enc[i, k.X_T_HI] = range_bounds(enc.time_to_cpa_s)
-            x_enc[i, k.X_A_LO], x_enc[i, k.X_A_HI] = range_bounds(enc.angle_deg)
-            x_enc[i, k.X_M_LO], x_enc[i, k.X_M_HI] = range_bounds(enc.miss_km)
-            x_enc[i, k.X_S_LO], x_enc[i, k.X_S_HI] = range_bounds(enc.speed_kt)
-            x_enc[i, k.X_MIRROR] = float(enc.mirror)
-            levels = enc.level if isinstance(enc.level, tuple) else (enc.level,)
-            x_enc_level[i, 0] = len(levels)
-            x_enc_level[i, 1 : 1 + len(levels)] = levels
         low, high = observation_bounds(cfg)
         self.obs_bounds = (low.astype(np.float64), high.astype(np.float64))
         """(low, high) of the observation Box, float64 (F,) each"""
@@ -275,12 +291,7 @@ class Simulator:
             route_len_slot=np.repeat(self.route_length_km, self.C),
             route_end=route_end,
             spacing=self.route_spacing_km,
-            x_pos=x_pos,
-            x_dir=x_dir,
-            x_speed=x_speed,
-            x_level=x_level,
-            x_enc=x_enc,
-            x_enc_level=x_enc_level,
+            **_placed_aircraft(cfg),
             li_start=li_start,
             li_goal=li_goal,
             li_dir=li_vec / np.maximum(li_len, 1e-9)[:, None],

@@ -626,6 +626,21 @@ def _spawn_traffic(e, s, c, acting):
         s.route_count[e, r] += 1
 
 
+@njit(cache=True, inline="always")
+def _approach_of(e, n, px, py, vx, vy, dt, s):
+    """The closest approach (km) over the next ``dt`` s of slot ``n`` of episode ``e`` to an
+    aircraft at (px, py) km flying (vx, vy) km/s: :func:`closest_approach` of their relative
+    motion (the one judgement of a pair in :func:`step_episodes`, background or controlled)."""
+    d, _ = closest_approach(
+        s.pos[e, n, 0] - px,
+        s.pos[e, n, 1] - py,
+        s.vel[e, n, 0] - vx,
+        s.vel[e, n, 1] - vy,
+        dt,
+    )
+    return d
+
+
 @njit(cache=True)
 def step_episodes(actions, s, c, o):
     """Advance every episode by one step (docs/model.md §3-§6).
@@ -735,13 +750,7 @@ def step_episodes(actions, s, c, o):
                 n = j if one else in_sky[j]  # ``one``: no list, every slot (_slots_in_sky)
                 if not s.active[e, n] or occ_m & (1 << s.level[e, n]) == 0:
                     continue
-                d, _ = closest_approach(
-                    s.pos[e, n, 0] - px,
-                    s.pos[e, n, 1] - py,
-                    s.vel[e, n, 0] - vx,
-                    s.vel[e, n, 1] - vy,
-                    dt,
-                )
+                d = _approach_of(e, n, px, py, vx, vy, dt, s)
                 if d < best:
                     best = d
                 if d < los_km:  # an NMAC (d < nmac_km < los_km) is also a LoS
@@ -761,13 +770,7 @@ def step_episodes(actions, s, c, o):
                 m2 = n - B
                 if occ_m & occ[m2] == 0:
                     continue
-                d, _ = closest_approach(
-                    s.pos[e, n, 0] - px,
-                    s.pos[e, n, 1] - py,
-                    s.vel[e, n, 0] - vx,
-                    s.vel[e, n, 1] - vy,
-                    dt,
-                )
+                d = _approach_of(e, n, px, py, vx, vy, dt, s)
                 if d < best:
                     best = d
                 if d < o.min_sep[e, m2]:
@@ -1044,6 +1047,17 @@ def conflicts_episodes(out, s, c):
                 out[e, m, n] = d_cpa < los_km
 
 
+@njit(cache=True, inline="always")
+def _count_entry(before, counts, k, e, m, n, first_controlled):
+    """The pair (m, n) of episode ``e`` is in LoS (``k`` = 0) or NMAC (``k`` = 1) now: an event
+    of kind ``k`` if it was not at the previous step (``before``), and of kind ``k + 2`` too when
+    ``n`` is a controlled aircraft (see :func:`pair_events`)."""
+    if not before[e, m, n]:
+        counts[k, e, m] += 1
+        if n >= first_controlled:
+            counts[k + 2, e, m] += 1
+
+
 @njit(cache=True)
 def pair_events(
     los_with, nmac_with, prev_los, prev_nmac, conflict_now, in_conflict, first_controlled, counts
@@ -1064,16 +1078,10 @@ def pair_events(
                 nw = nmac_with[e, m, n]
                 if lw:
                     los_any = 1
-                    if not prev_los[e, m, n]:
-                        counts[0, e, m] += 1
-                        if n >= first_controlled:
-                            counts[2, e, m] += 1
+                    _count_entry(prev_los, counts, 0, e, m, n, first_controlled)
                 if nw:
                     nmac_any = 1
-                    if not prev_nmac[e, m, n]:
-                        counts[1, e, m] += 1
-                        if n >= first_controlled:
-                            counts[3, e, m] += 1
+                    _count_entry(prev_nmac, counts, 1, e, m, n, first_controlled)
                 if conflict_now[e, m, n] and not in_conflict[e, m, n]:
                     counts[5, e, m] += 1
             counts[4, e, m] += los_any
