@@ -236,29 +236,8 @@ def compare(
             shown = [n for n in names if get_metric(n).scope == "aircraft"]
             na, nb = _sums(xa, role, shown), _sums(xb, role, shown)
             for name in shown:
-                va, vb = float(_ratio(na[name])), float(_ratio(nb[name]))
-                undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
-                diffs = _ratio(nb[name], idx) - _ratio(na[name], idx)
-                diffs = diffs[np.isfinite(diffs)]
-                lo, hi = (
-                    (float(np.percentile(diffs, 2.5)), float(np.percentile(diffs, 97.5)))
-                    if diffs.size
-                    else (np.nan, np.nan)
-                )
-                rows.append(
-                    {
-                        "scenario": sid,
-                        "aircraft": role,
-                        "metric": name,
-                        "a": va,
-                        "b": vb,
-                        "diff": vb - va,
-                        "ci95": [lo, hi],
-                        "significant": bool(lo > 0 or hi < 0),
-                        **({"undefined": undefined} if undefined else {}),
-                        **_mcnemar(name, na[name], nb[name]),
-                    }
-                )
+                row = _paired_row((sid, role, name), na[name], nb[name], idx)
+                rows.append({**row, **_mcnemar(name, na[name], nb[name])})
         if max(len(e["aircraft"]) for e in xa) > 1:  # several controlled aircraft
             system = [n for n in names if get_metric(n).scope == "system"]
             rows += _system_rows(sid, xa, xb, idx, system)
@@ -297,30 +276,40 @@ def _system_rows(
     episodes resampled with ``idx``, as the aircraft rows)."""
     rows = []
     for key in keys:
-        na, nb = _system_sums(xa, key), _system_sums(xb, key)
-        va, vb = float(_ratio(na)), float(_ratio(nb))
-        diffs = _ratio(nb, idx) - _ratio(na, idx)
-        diffs = diffs[np.isfinite(diffs)]
-        lo, hi = (
-            (float(np.percentile(diffs, 2.5)), float(np.percentile(diffs, 97.5)))
-            if diffs.size
-            else (np.nan, np.nan)
-        )
-        undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
         rows.append(
-            {
-                "scenario": sid,
-                "aircraft": "system",
-                "metric": key,
-                "a": va,
-                "b": vb,
-                "diff": vb - va,
-                "ci95": [lo, hi],
-                "significant": bool(lo > 0 or hi < 0),
-                **({"undefined": undefined} if undefined else {}),
-            }
+            _paired_row((sid, "system", key), _system_sums(xa, key), _system_sums(xb, key), idx)
         )
     return rows
+
+
+def _paired_row(
+    where: tuple[str, str, str], na: NDArray[np.float64], nb: NDArray[np.float64], idx: Any
+) -> dict[str, Any]:
+    """One row of the comparison: at ``where`` (scenario ``sid``, ``who``: a role or
+    ``system``, metric ``key``), the values of A and B (ratios of the per-episode sums ``na``,
+    ``nb``), B - A and its 95 % paired percentile-bootstrap interval over the resampled
+    episodes ``idx``."""
+    sid, who, key = where
+    va, vb = float(_ratio(na)), float(_ratio(nb))
+    diffs = _ratio(nb, idx) - _ratio(na, idx)
+    diffs = diffs[np.isfinite(diffs)]
+    lo, hi = (
+        (float(np.percentile(diffs, 2.5)), float(np.percentile(diffs, 97.5)))
+        if diffs.size
+        else (np.nan, np.nan)
+    )
+    undefined = [side for side, v in (("A", va), ("B", vb)) if v != v]
+    return {
+        "scenario": sid,
+        "aircraft": who,
+        "metric": key,
+        "a": va,
+        "b": vb,
+        "diff": vb - va,
+        "ci95": [lo, hi],
+        "significant": bool(lo > 0 or hi < 0),
+        **({"undefined": undefined} if undefined else {}),
+    }
 
 
 def _mcnemar(name: str, na: NDArray[np.float64], nb: NDArray[np.float64]) -> dict[str, Any]:
