@@ -25,7 +25,11 @@ the same bytes) of one JSON line per episode and scenario, sorted by scenario (i
 then episode: ``{"scenario", "episode", "seed", "steps", "aircraft": [per-aircraft record]}``;
 each aircraft record ends with ``actions``, its decisions one character each
 (:data:`cdr_bench.evaluate.runner.ACTION_CODE`), from which ``leaderboard build --check``
-replays the episode exactly. A schema-4 log written before xz (``<out>.jsonl.gz``, gzip, named
+replays the episode exactly. Inside the xz the log is in its stored form
+(:mod:`cdr_bench.evaluate.logcodec`): a header line, then each line without the fields that
+follow from the others (the episode seeds, counters, flags and copies; lossless, checked when
+written), a quarter smaller compressed; :func:`log_text` gives the full lines back and every
+reader sees the full records. A schema-4 log written before xz (``<out>.jsonl.gz``, gzip, named
 so by its JSON's ``episodes_file``) is still read. :func:`log_text` reads every form (xz, gzip,
 plain), with a cap on the decompressed size (:data:`cdr_bench.checks.MAX_EPISODE_LOG_BYTES`).
 
@@ -33,8 +37,10 @@ Results of schema 3 (a plain ``.jsonl`` log without decisions; the archived runs
 ``sweeps/landed/``) are still read, metrics computed the same way; they cannot be replayed, and
 a leaderboard entry must be schema 4.
 
-The two are one result: the JSON carries the SHA-256 of the uncompressed log
-(``episodes_sha256``; of the text, so that another compressor's bytes do not matter) and every
+The two are one result: the JSON carries the SHA-256 of the uncompressed log as stored
+(``episodes_sha256``, ``xz -dc <out>.jsonl.xz | sha256sum``; of the text, so that another
+compressor's bytes do not matter; a log written before the stored form, plain lines, is its
+own stored form) and every
 reader (:func:`read_result`, hence ``report``, ``compare`` and the leaderboard) refuses a pair
 that does not match, e.g. a new log beside an old JSON after a disk filled up between the two
 renames.
@@ -72,6 +78,7 @@ from typing import Any
 
 from cdr_bench.checks import MAX_EPISODE_LOG_BYTES, MAX_RESULT_BYTES, file_kind, read_input
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate import logcodec
 
 SCHEMA_VERSION = 4
 LOG_SUFFIX = ".jsonl.xz"
@@ -192,9 +199,24 @@ def log_text(
     path: str | os.PathLike[str], what: str = "per-episode log", limit: int = MAX_EPISODE_LOG_BYTES
 ) -> str:
     """The text of a JSON-lines log: xz (``X.jsonl.xz``, :func:`compress_log`), gzip
-    (``X.jsonl.gz``, the per-episode logs written before xz) or plain (any other name); at most
-    ``limit`` bytes of text, compressed or not. ``ValueError`` naming the file otherwise
+    (``X.jsonl.gz``, the per-episode logs written before xz) or plain (any other name), a
+    per-episode log's stored form expanded (:func:`cdr_bench.evaluate.logcodec.decode`); at
+    most ``limit`` bytes of text, compressed or not. ``ValueError`` naming the file otherwise
     (missing, not a regular file, damaged, too large, not UTF-8)."""
+    p = Path(path)
+    try:
+        return logcodec.decode(stored_text(p, what, limit), limit)
+    except ValueError as e:
+        if str(e).startswith(str(p)):
+            raise
+        raise ValueError(f"{p}: {e}") from None
+
+
+def stored_text(
+    path: str | os.PathLike[str], what: str = "per-episode log", limit: int = MAX_EPISODE_LOG_BYTES
+) -> str:
+    """The text a log file holds, decompressed (a per-episode log in its stored form, whose
+    SHA-256 its result names: ``xz -dc X.jsonl.xz | sha256sum``); as :func:`log_text`."""
     p = Path(path)
     try:
         raw = read_input(p, limit, what)
@@ -401,26 +423,31 @@ def strip_metrics(result: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_results(out: Path, result: dict[str, Any], episodes: list[dict[str, Any]]) -> None:
-    """The per-episode log first (xz JSONL, :func:`compress_log`), then the JSON that names it
-    and carries the SHA-256 of its text (both atomic); readers refuse a pair whose hashes
-    differ. Metrics are not written: they are computed when the result is read."""
-    text = jsonl_text(episodes)
-    result = {**strip_metrics(result), "episodes_sha256": sha256_text(text)}
-    atomic_write_text(episodes_path(out), compress_log(text))
+    """The per-episode log first (xz of its stored form, :func:`compress_log`), then the JSON
+    that names it and carries the SHA-256 of that text (both atomic); readers refuse a pair
+    whose hashes differ. Metrics are not written: they are computed when the result is read."""
+    seeds = {
+        str(s["id"]): (int(result["base_seed"]), str(s["config_hash"]))
+        for s in result.get("scenarios", [])
+        if isinstance(s, dict) and "id" in s and "config_hash" in s and "base_seed" in result
+    }
+    stored = logcodec.encode(jsonl_text(episodes), seeds)
+    result = {**strip_metrics(result), "episodes_sha256": sha256_text(stored)}
+    atomic_write_text(episodes_path(out), compress_log(stored))
     atomic_write_text(out, json.dumps(result, indent=1) + "\n")
 
 
 _EPISODES_CACHE: dict[tuple[str, str], list[dict[str, Any]]] = {}
 
 
-def _parse_episodes(path: Path, text: str, digest: str) -> list[dict[str, Any]]:
+def _parse_episodes(path: Path, stored: str, digest: str) -> list[dict[str, Any]]:
     key = (str(path.resolve()), digest)
     eps = _EPISODES_CACHE.get(key)
     if eps is None:
         try:
-            eps = [json.loads(line) for line in text.split("\n") if line.strip()]
-        except (json.JSONDecodeError, RecursionError) as e:
-            raise ValueError(f"{path}: a line is not JSON ({str(e)[:80]})") from None
+            eps = logcodec.records(stored)
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
         if len(_EPISODES_CACHE) >= 4:
             _EPISODES_CACHE.pop(next(iter(_EPISODES_CACHE)))
         _EPISODES_CACHE[key] = eps
@@ -489,8 +516,8 @@ def read_result(
     ep = p.parent / name
     if not ep.is_file():
         raise ValueError(f"{p}: its per-episode file {ep} is missing")
-    text = log_text(ep)
-    digest = sha256_text(text)
+    log = stored_text(ep)
+    digest = sha256_text(log)
     if digest != data.get("episodes_sha256"):
         raise ValueError(
             f"{p}: its per-episode file {ep.name} does not match it (episodes_sha256 differs: "
@@ -509,7 +536,7 @@ def read_result(
             f"schema {SCHEMA_VERSION} never holds (they are computed from the per-episode log "
             "when read): an edited file; re-run the evaluation"
         )
-    eps = _parse_episodes(ep, text, digest)
+    eps = _parse_episodes(ep, log, digest)
     return add_metrics(data, eps, roles) if metrics else data
 
 
@@ -522,5 +549,5 @@ def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -
     cached = _EPISODES_CACHE.get((str(p.resolve()), digest))
     if cached is not None:
         return cached
-    text = log_text(p)
-    return _parse_episodes(p, text, sha256_text(text))
+    stored = stored_text(p)
+    return _parse_episodes(p, stored, sha256_text(stored))

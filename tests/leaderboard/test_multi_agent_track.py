@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from cdr_bench.evaluate.results import log_text
 from cdr_bench.leaderboard.submission import SubmissionError, load_submission
 
 from .conftest import ROOT, cdr
@@ -54,10 +55,7 @@ def test_multi_agent_entries_are_ranked_apart_on_clean_flights(marl_repo: Path) 
     assert [r["entry"] for r in track["ranking"]] != []
     assert {r["entry"] for r in track["ranking"]} == {"mvp-all", "recip"}
     # the score is the ratio of sums over the episodes of the result file, recomputed here
-    eps = [
-        json.loads(line)
-        for line in __import__("lzma").open(lb / "results" / "recip.jsonl.xz", "rt")
-    ]
+    eps = [json.loads(line) for line in log_text(lb / "results" / "recip.jsonl.xz").splitlines()]
     high = [e for e in eps if e["scenario"] == "marl/high-all"]
     flights = sum(len(e["aircraft"]) for e in high)
     clean = sum(a["outcome"] == "success" and not a["los"] for e in high for a in e["aircraft"])
