@@ -6,7 +6,6 @@ episode, docs/model.md §10.4) and its decision latency. Subcommands ``multimoda
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import math
 import os
@@ -32,6 +31,7 @@ from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.runner import batch_seed, close_all, fault_message, load_for
 from cdr_bench.evaluate.search import FAMILIES, FAMILY_ACTIONS, search_families
 from cdr_bench.evaluate.seeds import episode_seeds
+from cdr_bench.render import figure_png
 from cdr_bench.scenarios import ScenarioConfig, load_scenario
 from cdr_bench.sim.core import SUCCESS
 from cdr_bench.vector_env import VectorEnv
@@ -285,14 +285,12 @@ def heatmap(
                 )
         fig.colorbar(im, ax=axes[i, :].tolist(), shrink=0.8, label="share of all samples")
     fig.suptitle(title)
-    out, png = Path(out_png), io.BytesIO()
+    out = Path(out_png)
     try:
-        fig.savefig(png, format="png", dpi=80)
+        png = figure_png(fig, 80)
     except OSError as e:
         raise UserError(f"{out}: cannot write it ({e.strerror or e})") from None
-    finally:
-        plt.close(fig)
-    atomic_write_text(out, png.getvalue())
+    atomic_write_text(out, png)
 
 
 def multimodal(

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import io
 import json
 import math
 from collections.abc import Callable
@@ -33,8 +32,10 @@ from typing import Any
 
 import numpy as np
 
+from cdr_bench import render
 from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
+from cdr_bench.render import figure_png
 
 DPI = 80
 MANIFEST = "manifest.json"
@@ -76,12 +77,7 @@ def matplotlib_version() -> str:
 
 
 def _png(fig: Any) -> bytes:
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, DPI)
 
 
 def _figure(width: float, height: float) -> tuple[Any, Any]:
@@ -461,10 +457,14 @@ def _sha256(b: bytes) -> str:
 @functools.cache
 def _code() -> dict[str, str]:
     """What the drawing code is: this module's source and the versions it draws with."""
+    import PIL
+
     return {
         "plots.py": _sha256(Path(__file__).read_bytes()),
+        "render.py": _sha256(Path(render.__file__).read_bytes()),
         "matplotlib": matplotlib_version(),
         "numpy": str(np.__version__),
+        "pillow": str(PIL.__version__),
     }
 
 

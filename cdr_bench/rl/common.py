@@ -31,11 +31,14 @@ import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cdr_bench.checks import ranged
+from cdr_bench.evaluate.results import atomic_write_text
+from cdr_bench.render import figure_png
 from cdr_bench.rl.curriculum import Curriculum, CurriculumEnv
 from cdr_bench.rl.quick_eval import ActBatch, quick_eval
 
@@ -467,5 +470,4 @@ def plot_curve(log_path: str, out_png: str, title: str) -> None:
     for a in ax:
         a.set_xlabel("environment steps")
     fig.tight_layout()
-    fig.savefig(out_png, dpi=80)
-    plt.close(fig)
+    atomic_write_text(Path(out_png), figure_png(fig, 80))

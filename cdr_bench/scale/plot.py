@@ -9,7 +9,6 @@ of the one-factor-at-a-time design) is drawn in every column at the default valu
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.leaderboard.sensitivity import METRICS, collect, sort_key
+from cdr_bench.render import figure_png
 
 
 def plot_sweep(sweep_dir: Path, out: Path, json_out: Path | None = None) -> dict[str, Any]:
@@ -53,12 +53,7 @@ def plot_sweep(sweep_dir: Path, out: Path, json_out: Path | None = None) -> dict
                 ax.set_ylabel(title)
     fig.suptitle(f"{sweep_dir.name}: mean ± std over seeds ({data['trials']} trials)", fontsize=10)
     fig.tight_layout()
-    png = io.BytesIO()
-    try:
-        fig.savefig(png, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    atomic_write_text(out, png.getvalue())  # never replaces anything but a regular file
+    atomic_write_text(out, figure_png(fig, 110))  # never replaces anything but a regular file
     if json_out is not None:
         atomic_write_text(json_out, json.dumps(data, indent=1) + "\n")
     return data
