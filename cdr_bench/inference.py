@@ -1176,10 +1176,15 @@ class CheckpointActorAgent:
     Linear+Tanh layers, Linear -> 27 logits): the argmax of the masked logits on this module's
     fixed numeric path, for every aircraft on its own observation. An agent file subclasses it
     with ``algorithm`` (the ``config["algorithm"]`` it accepts) and ``default_checkpoint`` (the
-    file beside it, used when neither ``checkpoint`` nor ``CDR_BENCH_CHECKPOINT`` is given)."""
+    file beside it, used when neither ``checkpoint`` nor ``CDR_BENCH_CHECKPOINT`` is given);
+    where it needs more, it overrides :meth:`refuse` (which checkpoints it takes),
+    :meth:`features` (what the network sees) and ``missing`` (what to say when there is no
+    checkpoint)."""
 
     algorithm: str = ""
     default_checkpoint: str = ""
+    missing: str = ""
+    """Said after "no checkpoint at PATH" when the file does not exist (empty: torch's error)."""
 
     def __init__(self, observation_space: Any = None, action_space: Any = None,
                  checkpoint: str | None = None) -> None:  # fmt: skip
@@ -1190,21 +1195,30 @@ class CheckpointActorAgent:
         self.checkpoint = (
             checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(self.default_checkpoint)
         )
+        if self.missing and not os.path.isfile(self.checkpoint):
+            raise FileNotFoundError(f"no checkpoint at {self.checkpoint}: {self.missing}")
         ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
-        config = ck["config"]
-        if config.get("algorithm") != self.algorithm:
-            raise ValueError(
-                f"{self.checkpoint}: not a {self.algorithm} actor (algorithm "
-                f"{config.get('algorithm')!r})"
-            )
+        reason = self.refuse(ck["config"])
+        if reason is not None:
+            raise ValueError(f"{self.checkpoint}: {reason}")
         state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
         self.net = MLP.from_state_dict(state, "", "tanh")
+
+    def refuse(self, config: Mapping[str, Any]) -> str | None:
+        """Why this checkpoint's ``config`` is not one this agent runs (None: it is)."""
+        if config.get("algorithm") != self.algorithm:
+            return f"not a {self.algorithm} actor (algorithm {config.get('algorithm')!r})"
+        return None
+
+    def features(self, observations: Any, masks: Any) -> Any:
+        """The network's input for these observations and masks (the observations)."""
+        return observations
 
     def reset(self, seed: int | None = None) -> None:
         """Deterministic policy: nothing to re-seed."""
 
     def act_batch(self, observations: Any, masks: Any) -> NDArray[np.int64]:
-        return masked_argmax(self.net(observations), masks)
+        return masked_argmax(self.net(self.features(observations, masks)), masks)
 
     def act(self, obs_dict: dict[str, Any]) -> int:
         return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])

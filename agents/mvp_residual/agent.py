@@ -14,45 +14,28 @@ x86-64 CPU.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-import torch
-
-from cdr_bench.inference import MLP, masked_argmax
+from cdr_bench.inference import CheckpointActorAgent
 from cdr_bench.resolvers import with_mvp_input
 
-DEFAULT_CHECKPOINT = Path(__file__).with_name("checkpoint.pt")
 
+class Agent(CheckpointActorAgent):
+    default_checkpoint = str(Path(__file__).with_name("checkpoint.pt"))
+    missing = (
+        "none is shipped (no residual is safer than mvp yet; agents/mvp_residual/README.md); "
+        "train one with `cdr-bench train maskable-ppo --mvp-input --teacher agents/mvp ...` and "
+        "point CDR_BENCH_CHECKPOINT at its checkpoint.pt"
+    )
 
-class Agent:
-    def __init__(self, observation_space=None, action_space=None, checkpoint: str | None = None):
-        self.checkpoint = (
-            checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(DEFAULT_CHECKPOINT)
-        )
-        if not os.path.isfile(self.checkpoint):
-            raise FileNotFoundError(
-                f"no checkpoint at {self.checkpoint}: none is shipped (no residual is safer than "
-                "mvp yet; agents/mvp_residual/README.md); train one with `cdr-bench train "
-                "maskable-ppo --mvp-input --teacher agents/mvp ...` and point "
-                "CDR_BENCH_CHECKPOINT at its checkpoint.pt"
-            )
-        ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
-        config = ck["config"]
+    def refuse(self, config: Any) -> str | None:
         if config.get("kind") != "ppo" or not config.get("mvp_input"):
-            raise ValueError(
-                f"{self.checkpoint}: not a PPO actor trained with --mvp-input "
-                f"(kind {config.get('kind')!r}, mvp_input {config.get('mvp_input')!r})"
+            return (
+                f"not a PPO actor trained with --mvp-input (kind {config.get('kind')!r}, "
+                f"mvp_input {config.get('mvp_input')!r})"
             )
-        state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
-        self.net = MLP.from_state_dict(state, "", "tanh")
+        return None
 
-    def reset(self, seed: int | None = None) -> None:
-        """Deterministic policy: nothing to re-seed."""
-
-    def act_batch(self, observations: np.ndarray, masks: np.ndarray) -> np.ndarray:
-        return masked_argmax(self.net(with_mvp_input(observations, masks)), masks)
-
-    def act(self, obs_dict: dict) -> int:
-        return int(self.act_batch(obs_dict["observation"][None], obs_dict["action_mask"][None])[0])
+    def features(self, observations: Any, masks: Any) -> Any:
+        return with_mvp_input(observations, masks)
