@@ -9,7 +9,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ("env_throughput", "evaluate_throughput", "leaderboard_render", "train_throughput")
+SCRIPTS = (
+    "env_throughput",
+    "evaluate_throughput",
+    "leaderboard_render",
+    "read_results",
+    "train_throughput",
+)
 
 
 def _run(script: str, *args: str) -> subprocess.CompletedProcess[str]:
