@@ -17,25 +17,16 @@ Run: ``python benchmarks/read_results.py [--reference ef57f64] [--rounds 3] [--c
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import statistics
-import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
-from _checkout import checkout as _checkout  # noqa: E402
-from _checkout import positive_int  # noqa: E402
+from _checkout import PROBE_PRELUDE, probe_main  # noqa: E402
 
-_PROBE = """
-import json, sys, time
-from pathlib import Path
-code = Path(sys.argv[1])
-sys.meta_path[:] = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]
-sys.path.insert(0, str(code))
+_PROBE = (
+    PROBE_PRELUDE
+    + """
 from cdr_bench.evaluate.results import read_episodes, read_result
 paths = [p for p in sorted((code / 'leaderboard' / 'results').glob('*.json'))
          if json.loads(p.read_text()).get('kind') == 'cdr-bench evaluation']
@@ -43,50 +34,26 @@ t0 = time.perf_counter()
 n = sum(len(read_episodes(p, read_result(p, metrics=False))) for p in paths)
 print(json.dumps({'seconds': time.perf_counter() - t0, 'episodes': n, 'results': len(paths)}))
 """
+)
 
 
-def _read(code: Path, cpu: int | None) -> dict[str, float]:
-    cmd = [sys.executable, "-c", _PROBE, str(code)]
-    if cpu is not None:
-        cmd = ["taskset", "-c", str(cpu), *cmd]
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONHASHSEED="0")
-    env.pop("PYTHONPATH", None)
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=code)
-    if r.returncode != 0:
-        raise SystemExit(f"reading failed in {code}:\n{r.stderr[-3000:]}")
-    out: dict[str, float] = json.loads(r.stdout.strip().splitlines()[-1])
-    return out
+def _same_episodes(cur: dict[str, float], ref: dict[str, float] | None) -> None:
+    if ref is not None and ref["episodes"] != cur["episodes"]:
+        raise SystemExit(
+            f"the reference holds {ref['episodes']} episodes, this one {cur['episodes']}"
+        )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reference", default="ef57f64", help="commit, or 'none'")
-    ap.add_argument("--rounds", type=positive_int, default=3)
-    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU")
-    args = ap.parse_args()
-    ref = None if args.reference == "none" else Path(_checkout(args.reference))
-    cur, old, ratios, n = [], [], [], 0
-    for _ in range(args.rounds):
-        c = _read(ROOT, args.cpu)
-        cur.append(c["seconds"])
-        n = int(c["episodes"])
-        if ref is not None:
-            r = _read(ref, args.cpu)
-            if int(r["episodes"]) != n:
-                raise SystemExit(f"the reference holds {r['episodes']} episodes, this one {n}")
-            old.append(r["seconds"])
-            ratios.append(r["seconds"] / c["seconds"])
-    head = subprocess.run(
-        ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
-    print(
-        f"# python {sys.version.split()[0]}, {args.rounds} rounds, {n} episodes, load average "
-        f"at the end {os.getloadavg()[0]:.1f}"
+    probe_main(
+        __doc__,
+        "ef57f64",
+        _PROBE,
+        "reading",
+        "read every committed result",
+        check=_same_episodes,
+        extra=lambda c: f"{int(c['episodes'])} episodes, ",
     )
-    print("| measure | current (" + head + ") median s | reference median s | ratio ref/cur |")
-    print("|---|---:|---:|---:|")
-    tail = f"{statistics.median(old):.1f} | {statistics.median(ratios):.2f} |" if old else "- | - |"
-    print(f"| read every committed result | {statistics.median(cur):.1f} | {tail}")
 
 
 if __name__ == "__main__":
