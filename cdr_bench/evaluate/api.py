@@ -242,23 +242,8 @@ def evaluate(
         cid = j.config.id
         batches = sorted((b for (s, _), b in done.items() if s == cid), key=lambda b: b["batch"])
         eps = [e for b in batches for e in b["episodes"]]
-        seeds = episode_seeds(base_seed, cid, j.config.config_hash(), 0, j.episodes)
-        if [e["seed"] for e in eps] != seeds:  # pragma: no cover - guards the checkpoint logic
-            raise RuntimeError(f"episodes of {cid} are incomplete or out of order")
+        scenarios_out.append(scenario_entry(j.config, base_seed, j.episodes, eps))
         all_episodes += [{"scenario": cid, **e} for e in eps]
-        scenarios_out.append(
-            {
-                "id": cid,
-                "config_hash": j.config.config_hash(),
-                "config": j.config.to_dict(),
-                "episodes": j.episodes,
-                "seeds_sha256": rf.sha256_text(",".join(map(str, seeds))),
-                "metrics": scenario_metrics(eps),
-            }
-        )
-        system = system_metrics(eps)
-        if system is not None:
-            scenarios_out[-1]["system_metrics"] = system
         latency[cid] = latency_summary(
             [x for b in batches for x in b["timing"]["per_decision_ms"]],
             [x for b in batches for x in b["timing"]["per_call_ms"]],
@@ -294,6 +279,28 @@ def evaluate(
     rf.write_results(out, result, all_episodes)
     log.remove()
     return result
+
+
+def scenario_entry(
+    config: ScenarioConfig, base_seed: int, n_episodes: int, records: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """A result's entry for one scenario: its configuration and hash, the episode count and the
+    digest of their seeds, and the metrics of ``records`` (every episode, in order)."""
+    seeds = episode_seeds(base_seed, config.id, config.config_hash(), 0, n_episodes)
+    if [e["seed"] for e in records] != seeds:  # pragma: no cover - guards the checkpoint logic
+        raise RuntimeError(f"episodes of {config.id} are incomplete or out of order")
+    out = {
+        "id": config.id,
+        "config_hash": config.config_hash(),
+        "config": config.to_dict(),
+        "episodes": n_episodes,
+        "seeds_sha256": rf.sha256_text(",".join(map(str, seeds))),
+        "metrics": scenario_metrics(records),
+    }
+    system = system_metrics(records)
+    if system is not None:
+        out["system_metrics"] = system
+    return out
 
 
 def record_traces(

@@ -77,6 +77,8 @@ from cdr_bench.leaderboard.data import (
     DEFAULT_REFERENCE,
     build_data,
     current_identity,
+    headroom_data,
+    headroom_path,
     load_entries,
     load_multimodal,
     load_replays,
@@ -100,6 +102,7 @@ from cdr_bench.leaderboard.verify import (
     batches_of,
     committed_ownship,
     fresh_verdict,
+    replay_result,
 )
 
 PAPER_EPISODES = TRACK_EPISODES["single-agent"]
@@ -186,6 +189,7 @@ def render_all(
     entries = load_entries(subs, results_dir)
     single = [e for e in entries if e.sub.track == "single-agent"]
     data = build_data(single, published, reference, load_study(lb_dir))
+    data["headroom"] = headroom_data(headroom_path(lb_dir), single, data["ranking"])
     multi = [e for e in entries if e.sub.track == "multi-agent"]
     data["multi_agent"] = track_data(multi)
     if data["multi_agent"] is not None:  # their replays beside the single-agent ones
@@ -831,6 +835,15 @@ def _check(
         views, results_dir, {t: n[t] if t in partial else None for t in TRACKS}, opts.workers
     )
     diffs += replay_diffs
+    hr_path = headroom_path(lb_dir)
+    if hr_path.exists():
+        n_hr, hr_diffs = replay_result(hr_path)
+        replayed += n_hr
+        if hr_diffs:
+            diffs.append(
+                f"{hr_path.relative_to(lb_dir)}: the planner's log is not what its recorded "
+                "decisions give:\n  " + "\n  ".join(hr_diffs)
+            )
     log(
         f"replayed {replayed} committed episodes of {len(views)} run(s) "
         f"({time.perf_counter() - t0:.1f} s): "

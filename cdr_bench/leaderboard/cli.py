@@ -127,6 +127,70 @@ def register(sub: Any) -> None:
         help="write nothing; exit code 1 and a diff if a block differs from what the files give",
     )
     d.set_defaults(func=_render_docs)
+    _add_headroom(lb_sub)
+
+
+def _add_headroom(lb_sub: Any) -> None:
+    h = lb_sub.add_parser(
+        "headroom",
+        help="plan the ranking's episodes with a planner that knows the traffic (unranked row)",
+        description="Fly every episode of the ranking's headline scenario (the committed "
+        "entries' episodes: their base seed and count) with the clairvoyant planner of "
+        "cdr_bench/evaluate/headroom.py and write leaderboard/headroom/<scenario>.json and its "
+        "log: the unranked headroom row of the leaderboard (re-render with `build`). The "
+        "planner knows the traffic's future, so it is not an agent and is never ranked; "
+        "`build --check` replays its recorded decisions.",
+    )
+    _add_dir(h)
+    h.add_argument(
+        "--reference",
+        default=None,
+        help="the entry whose committed episodes are planned (default: mvp; every entry is "
+        "scored on the same episodes)",
+    )
+    h.set_defaults(func=_headroom)
+
+
+def _headroom(args: argparse.Namespace) -> int:
+    import sys
+
+    from cdr_bench.errors import UserError
+    from cdr_bench.evaluate.headroom import headroom_result
+    from cdr_bench.evaluate.results import read_result
+    from cdr_bench.leaderboard.data import DEFAULT_REFERENCE, HEADLINE_SCENARIO, headroom_path
+    from cdr_bench.leaderboard.tables import result_path
+    from cdr_bench.scenarios import load_scenario
+
+    d = _leaderboard_dir(args)
+    ref = result_path(d / "results", args.reference or DEFAULT_REFERENCE)
+    if not ref.is_file():
+        raise UserError(f"headroom: {ref}: no result of the reference entry (--reference)")
+    try:
+        result = read_result(ref, metrics=False)
+    except ValueError as e:
+        raise UserError(f"headroom: the reference entry's result is needed ({e})") from None
+    sc = next((s for s in result["scenarios"] if s["id"] == HEADLINE_SCENARIO), None)
+    if sc is None:
+        raise UserError(f"{ref}: no {HEADLINE_SCENARIO} episodes to plan")
+    config = load_scenario(HEADLINE_SCENARIO)
+    if config.config_hash() != sc["config_hash"]:
+        raise UserError(f"{ref}: scored on another configuration of {HEADLINE_SCENARIO}")
+    out = headroom_path(d)
+    got = headroom_result(
+        config,
+        int(result["base_seed"]),
+        int(sc["episodes"]),
+        out,
+        batch_size=int(result["batch_size"]),
+        progress=True,
+    )
+    m = got["scenarios"][0]["metrics"]["ownship"]["clean_success_rate"]
+    print(
+        f"cdr-bench leaderboard: wrote {out}: clean success {100 * m['value']:.1f} % "
+        f"({m['count']}/{m['n']})",
+        file=sys.stderr,
+    )
+    return 0
 
 
 def _add_dir(p: argparse.ArgumentParser) -> None:

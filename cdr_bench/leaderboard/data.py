@@ -327,13 +327,19 @@ def _units(e: Entry) -> list[list[Entry]]:
 
 def _outcomes(run: Entry, sid: str, metric: str) -> Any:
     """The ownship's 0/1 outcome of ``metric`` per episode of ``sid`` (file order)."""
+    return episode_outcomes(run.episodes, run.path, sid, metric)
+
+
+def episode_outcomes(episodes: list[dict[str, Any]], path: Path, sid: str, metric: str) -> Any:
+    """The ownship's 0/1 outcome of ``metric`` per episode of ``sid`` in ``episodes`` (the
+    records of the result ``path``, in file order)."""
     import numpy as np
 
     from cdr_bench.evaluate.metrics import get_metric, role_of
 
     paired = get_metric(metric).paired
     out = []
-    for ep in run.episodes:
+    for ep in episodes:
         if ep["scenario"] != sid:
             continue
         num = den = 0.0
@@ -342,7 +348,7 @@ def _outcomes(run: Entry, sid: str, metric: str) -> Any:
                 a, b = paired(ac)
                 num, den = num + a, den + b
         if den != 1 or num not in (0, 1):
-            raise UserError(f"{run.path}: {metric} is not one yes/no outcome per episode")
+            raise UserError(f"{path}: {metric} is not one yes/no outcome per episode")
         out.append(int(num))
     return np.array(out, dtype=np.int64)
 
@@ -519,6 +525,74 @@ def rank_entries(entries: list[Entry], paired: Paired) -> dict[str, Any]:
         "baseline": None if base is None else base.name,
         "learned_vs_baseline": vs_base("learned"),
         "hybrid_vs_baseline": vs_base("hybrid"),
+    }
+
+
+HEADROOM_DIR = "headroom"
+"""The folder of the leaderboard that holds the headroom planner's result
+(:mod:`cdr_bench.evaluate.headroom`), ``<headline scenario>.json`` and its log."""
+
+
+def headroom_path(lb_dir: Path, sid: str = HEADLINE_SCENARIO) -> Path:
+    """Where the headroom planner's result on ``sid`` lives."""
+    return lb_dir / HEADROOM_DIR / f"{sid}.json"
+
+
+def headroom_data(
+    path: Path, entries: list[Entry], ranking: dict[str, Any]
+) -> dict[str, Any] | None:
+    """The unranked headroom row: the planner's headline metrics on the ranking's episodes, and
+    its paired difference with the baseline (McNemar's exact test on the same episodes) and with
+    the top score. None when there is no such file; :class:`UserError` when it is not the
+    planner's result on the very episodes of the ranking."""
+    from cdr_bench.evaluate.compare import mcnemar_exact
+    from cdr_bench.evaluate.headroom import NAME
+
+    if not path.exists():
+        return None
+    sid = ranking["scenario"]
+    try:
+        result = read_result(path)
+        episodes = read_episodes(path, result)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    if result["agent"].get("name") != NAME or [s["id"] for s in result["scenarios"]] != [sid]:
+        raise UserError(f"{path}: expected the headroom planner's result on {sid} alone")
+    by_name = {e.name: e for e in entries}
+    base = by_name.get(ranking["baseline"] or "") or by_name[ranking["leader"]]
+    mine, theirs = result["scenarios"][0], base.scenario(sid) or {}
+    same = (result["base_seed"], mine["config_hash"], mine["episodes"], mine["seeds_sha256"])
+    if same != (
+        base.result["base_seed"],
+        theirs.get("config_hash"),
+        theirs.get("episodes"),
+        theirs.get("seeds_sha256"),
+    ):
+        raise UserError(
+            f"{path}: not on the ranking's episodes of {sid} (base seed, configuration and "
+            "episodes must be those of the entries); re-run `cdr-bench leaderboard headroom`"
+        )
+    a = episode_outcomes(episodes, path, sid, HEADLINE_METRIC)
+    b = episode_outcomes(base.episodes, base.path, sid, HEADLINE_METRIC)
+    better, worse = int(((a == 1) & (b == 0)).sum()), int(((a == 0) & (b == 1)).sum())
+    m = mine["metrics"]["ownship"]
+    top = ranking["rows"][0]
+    return {
+        "scenario": sid,
+        "episodes": mine["episodes"],
+        "base_seed": result["base_seed"],
+        "metrics": {k: _metric(m.get(k)) for k in (HEADLINE_METRIC, *PAPER_FIVE, TIE_BREAK)},
+        "vs_baseline": {
+            "entry": base.name,
+            "diff": _round(float(a.mean() - b.mean())),
+            "better": better,
+            "worse": worse,
+            "p": mcnemar_exact(better, worse),
+        },
+        "vs_top": {
+            "entry": top["entry"],
+            "diff": _round(float(m[HEADLINE_METRIC]["value"]) - float(top["headline"]["value"])),
+        },
     }
 
 

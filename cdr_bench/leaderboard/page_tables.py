@@ -173,6 +173,53 @@ def _headers() -> dict[str, str]:
     return {c.key: c.header for c in COLUMNS}
 
 
+HEADROOM_NOTE = (
+    "**Headroom, not ranked.** What is possible on the same {n} episodes of `{sc}`: a planner "
+    "that knows the future of the traffic (`cdr_bench/evaluate/headroom.py`) tries, in a copy "
+    "of each episode, the follow-on manoeuvres of the tactical search (hold, then a turn, a "
+    "hold and a return to the goal, with a target speed and levels; simplest first) and keeps "
+    "the first after which the ownship reaches its goal with no LoS. It is not an agent (no "
+    "submission can see the traffic's future) and its rate is a lower bound of what is "
+    "possible: it stops at the first clean plan and searches one family of plans. Its decisions "
+    "are in its log, and `leaderboard build --check` replays them like any entry's. Beside it: "
+    "its paired difference with {base} on the same episodes (episodes clean for the planner and "
+    "not for {base}, and the reverse; McNemar's exact test) and its distance to the top score."
+)
+
+
+def headroom_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
+    """The headroom row (``data["headroom"]``): the planner's headline score with its interval,
+    its paired difference with the baseline, its distance to the top score, the tie-break and
+    the paper's five metrics."""
+    hr = data["headroom"]
+    ent = {e["name"]: e for e in data["entries"]}
+    header, kind = _headers(), _kinds()
+    m, vb, vt = hr["metrics"], hr["vs_baseline"], hr["vs_top"]
+    key, tie = data["ranking"]["metric"], data["ranking"]["tie_break"]
+    rest = [k for k in m if k != key]
+    base = ent[vb["entry"]]["display_name"]
+    top = ent[vt["entry"]]["display_name"]
+    head = [
+        "reference",
+        f"{header[key]} ({hr['scenario']})",
+        f"vs {md_text(base)} (paired)",
+        f"vs top score ({md_text(top)})",
+        *[header[k] for k in rest],
+    ]
+    row = [
+        Cell("Clairvoyant planner (knows the traffic; not an agent)"),
+        Cell(fmt_metric("rate", m[key]), m[key]["value"]),
+        Cell(
+            f"{100 * vb['diff']:+.1f} pp ({vb['better']} vs {vb['worse']} episodes, "
+            f"McNemar exact p = {vb['p']:.2g})",
+            vb["diff"],
+        ),
+        Cell(f"{100 * vt['diff']:+.1f} pp", vt["diff"]),
+        *[Cell(fmt_metric(kind[k], m[k], ci=k == tie), m[k]["value"]) for k in rest],
+    ]
+    return head, [row]
+
+
 def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
     """The headline ranking (``data["ranking"]``): rank, entry, group, the headline score with
     its interval, the paired gap to the row above, the tie-break, the paper's five metrics on

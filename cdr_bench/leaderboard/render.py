@@ -21,11 +21,13 @@ from urllib.parse import quote
 
 from cdr_bench.evaluate.report import COLUMNS, Rows, fmt_metric, fmt_value, md_table
 from cdr_bench.leaderboard.page_tables import (
+    HEADROOM_NOTE,
     HIGHER,
     LOWER,
     claims_table,
     entries_table,
     esc,
+    headroom_table,
     html_table,
     inline_md,
     published_table,
@@ -292,6 +294,14 @@ def conclusion(data: dict[str, Any]) -> list[str]:
             f"episodes, the learned agents in {fmt_value('rate', min(learned))}–"
             f"{fmt_value('rate', max(learned))}."
         )
+    hr = data.get("headroom")
+    if hr:
+        m, top = hr["metrics"][rk["metric"]], hr["vs_top"]
+        out.append(
+            f"Headroom: a planner that knows the future of the traffic (not an agent, not "
+            f"ranked) reaches a clean success of {fmt_metric('rate', m)} on the same episodes, "
+            f"{100 * top['diff']:.1f} points above the top score."
+        )
     return out
 
 
@@ -315,6 +325,12 @@ def published_tables(pub: Published) -> list[tuple[str, list[str], Rows]]:
         rows = [(r.row, r.density, r.values) for r in pub.table(table)]
         out.append((f"{table} — {cite}", *published_table(first, cols, rows)))
     return out
+
+
+def _headroom_note(data: dict[str, Any]) -> str:
+    hr = data["headroom"]
+    base = _names(data)[hr["vs_baseline"]["entry"]]
+    return HEADROOM_NOTE.format(n=hr["episodes"], sc=hr["scenario"], base=base)
 
 
 def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> str:
@@ -343,6 +359,16 @@ def render_markdown(data: dict[str, Any], pub: Published, plots: list[str]) -> s
         HEADLINE_NOTE.format(sc=rk["scenario"], down=LOWER),
         "",
     ]
+    if data.get("headroom"):
+        head, rows = headroom_table(data)
+        out += [
+            "### Headroom: what knowing the traffic achieves on the same episodes (not ranked)",
+            "",
+            md_table(head, rows, numeric_from=1),
+            "",
+            _headroom_note(data),
+            "",
+        ]
     title, head, rows = table2_beside(pub, rk["scenario"])
     out += [f"### {title}", "", md_table(head, rows), ""]
     head, rows, _ = seeds_table(data)
@@ -779,6 +805,16 @@ def render_html(
         f'<p class="note">{inline_md(HEADLINE_NOTE.format(sc=rk["scenario"], down=LOWER))} '
         "Click a column header to sort; tick the groups to show at the top.</p>",
     ]
+    if data.get("headroom"):
+        head, rows = headroom_table(data)
+        b += [
+            '<section id="headroom">',
+            "<h3>Headroom: what knowing the traffic achieves on the same episodes (not ranked)"
+            "</h3>",
+            html_table("table-headroom", head, rows),
+            f'<p class="note">{inline_md(_headroom_note(data))}</p>',
+            "</section>",
+        ]
     title, head, rows = table2_beside(pub, rk["scenario"])
     b += [
         '<section data-group="published">',
