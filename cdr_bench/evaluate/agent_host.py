@@ -192,7 +192,7 @@ class Host:
                     self.error("raised", self.agent_error_line(e, self.agents[handle].path))
                 else:
                     self.reply(b"K")
-            elif op in (b"A", b"L"):
+            elif op in (b"A", b"L", b"J"):
                 self.act(op, payload)
             else:
                 self.error("protocol", f"unknown request {op!r}")
@@ -216,7 +216,7 @@ class Host:
             self.error("load", str(e))
             return
         self.dims[handle] = dim
-        self.reply(b"K")
+        self.reply(b"K", b"\x01" if self.agents[handle].joint else b"\x00")
 
     def act(self, op: bytes, payload: bytes) -> None:
         handle, n = struct.unpack_from("<II", payload)
@@ -225,6 +225,10 @@ class Host:
         obs = np.frombuffer(payload, np.float32, n * dim, offset=8).reshape(n, dim).copy()
         masks = np.frombuffer(payload, np.int8, n * N_ACTIONS, offset=8 + 4 * n * dim)
         masks = masks.reshape(n, N_ACTIONS).copy()
+        if op == b"J":  # then the episode and the aircraft of each row
+            at = 8 + 4 * n * dim + n * N_ACTIONS
+            rows = np.frombuffer(payload, "<i4", 2 * n, offset=at).astype(np.int64)
+            episodes, aircraft = rows[:n].copy(), rows[n:].copy()
         if op == b"L":
             for i in range(n):
                 try:
@@ -235,13 +239,16 @@ class Host:
             self.reply(b"K")
             return
         try:
-            out = agent.act_batch(obs, masks)
+            if op == b"J":
+                out = agent.act_joint(obs, masks, episodes, aircraft)
+            else:
+                out = agent.act_batch(obs, masks)
             actions, row, what = validate_actions(out, n)
         except Exception as e:  # noqa: BLE001 - the agent's own error (also from a generator)
             self.error("raised", self.agent_error_line(e, agent.path))
             return
         if actions is None:
-            how = "act_batch" if agent.has_act_batch else "act"
+            how = "act_joint" if op == b"J" else "act_batch" if agent.has_act_batch else "act"
             self.error("invalid", f"invalid action from {how}: {what}", row)
             return
         self.reply(b"K", actions.astype("<i8").tobytes())

@@ -162,8 +162,9 @@ def evaluate(
     check_timeout("--load-timeout", options.load_timeout_s)
     identity = agent_identity(agent_path)
     agent_file = str(resolve_agent_path(agent_path))  # a built-in name too (mvp)
+    joint = False
     for job in jobs:  # load errors now, before any work
-        load_for(agent_file, job.config, options)
+        joint = load_for(agent_file, job.config, options).joint or joint
     if workers > 1 or backend != "local":
         close_all()  # the workers start their own agent processes
 
@@ -259,6 +260,7 @@ def evaluate(
         "batch_size": batch_size,
         "seed_derivation": SEED_DERIVATION,
         **({"agent_seed_key": agent_key} if agent_key else {}),
+        **({"acting": "joint"} if joint else {}),
         "versions": versions,
         "run_key": run_key,
         "episodes_file": rf.episodes_path(out).name,

@@ -280,6 +280,8 @@ class LoadedAgent:
         self.path = path
         self.name = path.parent.name if path.name == "agent.py" else path.stem
         self.has_act_batch = callable(getattr(instance, "act_batch", None))
+        self.joint = callable(getattr(instance, "act_joint", None))
+        """the agent acts jointly: ``act_joint`` sees every aircraft of an episode at once"""
         self._reset = getattr(instance, "reset", None)
 
     def act(self, observation: dict[str, NDArray[Any]]) -> Any:
@@ -292,6 +294,15 @@ class LoadedAgent:
             self.instance.act({"observation": o, "action_mask": m})
             for o, m in zip(observations, masks, strict=True)
         ]
+
+    def act_joint(
+        self,
+        observations: NDArray[np.float32],
+        masks: NDArray[np.int8],
+        episodes: NDArray[np.int64],
+        aircraft: NDArray[np.int64],
+    ) -> Any:
+        return self.instance.act_joint(observations, masks, episodes, aircraft)
 
     def reset(self, seed: int) -> None:
         if callable(self._reset):

@@ -9,6 +9,7 @@ defines a class ``Agent``::
         # optional:
         def act_batch(self, observations, masks) -> "array of ints": ...
         def reset(self, seed: int) -> None: ...
+        def act_joint(self, observations, masks, episodes, aircraft) -> "array of ints": ...
 
 * ``observation_space`` is the per-agent ``gymnasium.spaces.Dict`` of the environment
   (``observation``: ``Box(F,)`` float32, ``action_mask``: ``Box(27,)`` int8) and
@@ -25,11 +26,23 @@ defines a class ``Agent``::
   derived from the run's base seed, the scenario and the batch; an agent that draws random
   numbers should re-seed from it so that results do not depend on ``--workers`` or ``--resume``.
 
-The protocol is Markov: a decision may depend only on the row it is given (the same agent
-drives the ownship and every learning intruder). A masked action is counted as invalid and its
-level change is not executed; a value that is not an integer in 0..26 (a float, NaN, a bool, an
-out-of-range index), an exception in the agent or a decision that exceeds the per-decision time
-limit stops the run with the episode, the step and what went wrong.
+* ``act_joint(observations, masks, episodes, aircraft)`` (optional; the *joint* acting mode):
+  the same rows as ``act_batch`` plus, per row, ``episodes`` (N,) int64, which episode of the
+  call the row belongs to (the rows of an episode are together, in increasing order), and
+  ``aircraft`` (N,) int64, which of that episode's controlled aircraft it is (0: the ownship or
+  the first controlled aircraft; the PettingZoo agent order). An agent that defines it is asked
+  through it instead of ``act_batch`` and ``act``: the decision of an aircraft may then depend on
+  the observations of every aircraft of its episode at that step (a centralised controller, or
+  aircraft that coordinate), never on another episode. Its result records ``"acting":
+  "joint"``.
+
+Without ``act_joint`` the protocol is decentralised and Markov: a decision may depend only on
+the row it is given (the same agent drives the ownship and every learning intruder).
+
+A masked action is counted as invalid and its level change is not executed; a value that is
+not an integer in 0..26 (a float, NaN, a bool, an out-of-range index), an exception in the agent
+or a decision that exceeds the per-decision time limit stops the run with the episode, the step
+and what went wrong.
 
 The agent runs in its own process (:mod:`cdr_bench.evaluate.remote`): it is imported and
 constructed there, receives the observation and mask arrays of each step and returns actions;
@@ -55,6 +68,20 @@ class Agent(Protocol):
 
     def act(self, observation: dict[str, NDArray[Any]]) -> int:
         """One action index 0..26 for one aircraft's observation dict."""
+        ...
+
+
+class JointAgent(Agent, Protocol):
+    """An agent that decides for the controlled aircraft of each episode together."""
+
+    def act_joint(
+        self,
+        observations: NDArray[np.float32],
+        masks: NDArray[np.int8],
+        episodes: NDArray[np.int64],
+        aircraft: NDArray[np.int64],
+    ) -> NDArray[np.integer] | list[int]:
+        """(N,) action indices; ``episodes`` and ``aircraft`` (N,) say whose each row is."""
         ...
 
 

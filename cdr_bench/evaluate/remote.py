@@ -186,11 +186,11 @@ class AgentProcess:
             handle = len(self._handles)
             payload = struct.pack("<II", handle, low.size) + key[1]
             try:
-                self._request(b"C", payload, 0, self.options.load_timeout_s, "construction")
+                flags = self._request(b"C", payload, 1, self.options.load_timeout_s, "construction")
             except AgentFault as f:
                 self.close()
                 raise AgentError(self._load_message(f)) from None
-            self._handles[key] = RemoteAgent(self, handle, low.size)
+            self._handles[key] = RemoteAgent(self, handle, low.size, joint=flags == b"\x01")
         return self._handles[key]
 
     def _load_message(self, f: AgentFault) -> str:
@@ -357,9 +357,12 @@ class RemoteAgent:
     """One ``Agent`` instance inside an :class:`AgentProcess`: the surface the runner and the
     analyses use (``act_batch``, ``reset``; :class:`AgentFault` on misbehaviour)."""
 
-    def __init__(self, process: AgentProcess, handle: int, obs_dim: int):
+    def __init__(self, process: AgentProcess, handle: int, obs_dim: int, joint: bool = False):
         self.process, self.handle, self.obs_dim = process, handle, obs_dim
         self.name, self.path = process.name, process.path
+        self.joint = joint
+        """the agent defines ``act_joint``: the evaluator asks it for the aircraft of each
+        episode together (:meth:`act_joint`) instead of row by row"""
 
     def reset(self, seed: int) -> None:
         p = self.process
@@ -389,6 +392,30 @@ class RemoteAgent:
         actions = np.frombuffer(data, "<i8").astype(np.int64)
         bad = np.flatnonzero((actions < 0) | (actions >= N_ACTIONS))
         if bad.size:
+            raise AgentFault(
+                "protocol", "the agent process broke the protocol (action out of range)"
+            )
+        return actions
+
+    def act_joint(
+        self,
+        obs: NDArray[np.float32],
+        masks: NDArray[np.int8],
+        episodes: NDArray[np.int64],
+        aircraft: NDArray[np.int64],
+    ) -> NDArray[np.int64]:
+        """(n,) actions for the rows of whole episodes: ``episodes`` (n,) says which episode of
+        the call each row belongs to (rows of an episode together), ``aircraft`` (n,) which of
+        its controlled aircraft it is (0: the ownship)."""
+        n = obs.shape[0]
+        p = self.process
+        rows = np.concatenate([episodes, aircraft]).astype("<i4").tobytes()
+        data = p._request(
+            b"J", self._payload(obs, masks) + rows, 8 * n, p.options.decision_timeout_s,
+            "a joint decision",
+        )  # fmt: skip
+        actions = np.frombuffer(data, "<i8").astype(np.int64)
+        if ((actions < 0) | (actions >= N_ACTIONS)).any():
             raise AgentFault(
                 "protocol", "the agent process broke the protocol (action out of range)"
             )

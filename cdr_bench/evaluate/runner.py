@@ -222,9 +222,12 @@ def run_batch(
         if agent is not None:
             t0 = time.perf_counter()
             try:
-                actions = agent.act_batch(obs, masks)
+                if agent.joint:
+                    actions = agent.act_joint(obs, masks, rows_e, rows_m)
+                else:
+                    actions = agent.act_batch(obs, masks)
             except AgentFault as f:
-                if f.kind == "raised" and f.row < 0 and n > 1:
+                if f.kind == "raised" and f.row < 0 and n > 1 and not agent.joint:
                     f = agent.localise(obs, masks) or f
                 at = (
                     where(f.row)
