@@ -113,7 +113,10 @@ def _sum_k(x: Array) -> Array:
 
 
 def mvp_actions(
-    observations: NDArray, masks: NDArray, reciprocal: bool = False
+    observations: NDArray,
+    masks: NDArray,
+    reciprocal: bool = False,
+    right_of_way: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.int64]:
     """(N,) actions of ``mvp`` for (N, F) observations and (N, 27) action masks.
 
@@ -125,7 +128,12 @@ def mvp_actions(
     both: an aircraft heading east (north-east through south-east, ``sin(heading) >= 0``) may
     only climb, one heading west only descend, so the two aircraft of a head-on or crossing
     conflict never escape to the same level. Without ``reciprocal`` the actions are exactly
-    ``mvp``'s."""
+    ``mvp``'s.
+
+    ``right_of_way`` (N, K) bool, optional: the observed aircraft (neighbour slots) against which
+    the aircraft keeps its course, because the other aircraft resolves the conflict (a joint
+    controller assigns each conflict to one of its two aircraft, ``agents/mvp_priority``): they
+    are left out of the conflicts, and still counted when a level is checked for an escape."""
     obs = np.asarray(observations, dtype=np.float64)
     masks = np.asarray(masks)
     n = obs.shape[0]
@@ -150,6 +158,8 @@ def mvp_actions(
     # 1. detection at the own level
     t, d = _cpa(rx, ry, vx, vy, LOOKAHEAD_S)
     conflict = present & (dlev == 0) & ((d < PZ_KM) | (now < PZ_KM))
+    if right_of_way is not None:
+        conflict &= ~np.asarray(right_of_way, dtype=bool)
     any_conflict = conflict.any(1)
 
     # 2. vertical escape: a feasible adjacent level with nothing observed near it

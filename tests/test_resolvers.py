@@ -151,3 +151,38 @@ def test_reciprocal_mvp_asks_for_half_the_velocity_change():
         assert psi_b in (psi_a, 0) or psi_a == 0
         differ += a != b
     assert differ > 0
+
+
+def _priority_agent():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "agents" / "mvp_priority" / "agent.py"
+    spec = importlib.util.spec_from_file_location("mvp_priority_agent", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_right_of_way_goes_to_the_lower_index_of_two_aircraft_that_see_each_other():
+    """Two controlled aircraft head-on at one level, each the other's only neighbour (the
+    same vector reversed), and a third in another episode: the lower index keeps its course,
+    the other resolves alone with MVP's full manoeuvre; without the pairing both would."""
+    agent = _priority_agent()
+    north = _obs(heading_deg=0.0, neighbours=[(0.0, 40.0, 0.0, -860.0, 0)])
+    south = _obs(heading_deg=180.0, neighbours=[(0.0, -40.0, 0.0, 860.0, 0)])
+    obs = np.concatenate([north, south, north])
+    episodes, aircraft = np.array([0, 0, 1]), np.array([0, 1, 0])
+    row = agent.right_of_way(obs, episodes, aircraft)
+    assert row.tolist() == [[True, False, False], [False] * 3, [False] * 3]
+    masks = np.ones((3, 27), np.int8)
+    masks[:, [_index(0, 0, 1), _index(0, 0, -1)]] = 0  # no level change: turn or speed
+    a = agent.Agent(None, None).act_joint(obs, masks, episodes, aircraft)
+    mvp = mvp_actions(obs, masks)
+    assert a[0] == direct_actions(obs)[0] != mvp[0]  # keeps its course
+    assert a[1] == mvp[1] != direct_actions(obs)[1]  # resolves
+    assert a[2] == mvp[2]  # alone in its episode: plain MVP
+    # the same aircraft, their indices swapped: the right of way follows the index
+    swapped = agent.right_of_way(obs, episodes, np.array([1, 0, 0]))
+    assert swapped.tolist() == [[False] * 3, [True, False, False], [False] * 3]

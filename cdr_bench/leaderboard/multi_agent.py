@@ -222,6 +222,7 @@ def track_data(entries: list[Entry]) -> dict[str, Any] | None:
                 "entry": e.name,
                 "rank": ranks[e.name],
                 "group": e.sub.group,
+                "acting": e.result.get("acting", "decentralised"),
                 "score": score[e.name],
                 "vs_above": above[e.name],
                 "vs_top": None if e is order[0] else sc.diff(order[0], e),
@@ -311,8 +312,11 @@ def conclusion(track: dict[str, Any], names: dict[str, str]) -> list[str]:
 # Pages
 
 TRACK_NOTE = (
-    "Every aircraft of the sector is controlled by the entry (decentralised: the agent decides for "
-    "each aircraft on that aircraft's own observation; docs/model.md §8.4). **Headline score: the "
+    "Every aircraft of the sector is controlled by the entry, acting *decentralised* (the agent "
+    "decides for each aircraft on that aircraft's own observation) or *joint* (the agent sees "
+    "the observations of every controlled aircraft of an episode at once and decides for them "
+    'together: `act_joint`, CONTRIBUTING.md "Add an agent"); docs/model.md §8.4. '
+    "**Headline score: the "
     "share of clean flights on `{sc}`** - controlled flights that reach their goal with no loss "
     "of separation at all - over the entry's training seeds (the mean of its seeds; seeds sharing "
     "a parent count as one), with a two-level bootstrap interval (seeds, then whole episodes: the "
@@ -344,6 +348,7 @@ def ranking_table(track: dict[str, Any]) -> tuple[list[str], Any, list[str]]:
         "#",
         "entry",
         "group",
+        "acting",
         f"clean flights ({track['scenario']})",
         "vs row above",
         f"vs {names.get(track['baseline'] or '', 'MVP')}",
@@ -360,6 +365,7 @@ def ranking_table(track: dict[str, Any]) -> tuple[list[str], Any, list[str]]:
                 Cell(r["rank"], sort=int(r["rank"].rstrip("="))),
                 Cell(names[r["entry"]]),
                 Cell(r["group"]),
+                Cell(r["acting"]),
                 Cell(label, sort=s["value"]),
                 Cell(fmt_diff("rate", r["vs_above"])),
                 Cell(fmt_diff("rate", r["vs_baseline"]) if r["vs_baseline"] else "reference"),

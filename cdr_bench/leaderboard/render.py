@@ -469,7 +469,7 @@ def _multi_agent_md(data: dict[str, Any]) -> list[str]:
     out += [
         f"### Ranking: clean flights on {track['scenario']}",
         "",
-        md_table(head, rows, numeric_from=3),
+        md_table(head, rows, numeric_from=4),
         "",
         ma.note(track),
         "",

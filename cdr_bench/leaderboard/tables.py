@@ -505,7 +505,7 @@ def multi_agent(repo: Repo) -> str:
         return "No multi-agent entry yet."
     head, rows, _ = ma.ranking_table(track)
     return "\n\n".join(
-        [*ma.conclusion(track, ma._names(track)), md_table(head, rows, numeric_from=3)]
+        [*ma.conclusion(track, ma._names(track)), md_table(head, rows, numeric_from=4)]
     )
 
 
