@@ -168,23 +168,14 @@ def evaluate(
     if workers > 1 or backend != "local":
         close_all()  # the workers start their own agent processes
 
-    versions = rf.package_versions()
-    scen_keys = [
-        {"id": j.config.id, "config_hash": j.config.config_hash(), "episodes": j.episodes}
-        for j in jobs
-    ]
-    run_key = rf.sha256_text(
-        rf.canonical(
-            {
-                "schema_version": rf.SCHEMA_VERSION,
-                "agent": identity["sha256"],
-                "scenarios": scen_keys,
-                "base_seed": base_seed,
-                "batch_size": batch_size,
-                "versions": versions,
-                **({"agent_seed_key": agent_key} if agent_key else {}),
-            }
-        )
+    jobs_n = [(j.config, j.episodes) for j in jobs]
+    head = result_head(identity, jobs_n, base_seed, batch_size, agent_key, suite, joint)
+    run_key, scen_keys = (
+        head["run_key"],
+        [
+            {"id": j.config.id, "config_hash": j.config.config_hash(), "episodes": j.episodes}
+            for j in jobs
+        ],
     )
     log = rf.PartialLog(rf.partial_path(out), run_key)
     done: dict[tuple[str, int], dict[str, Any]] = {}
@@ -251,18 +242,7 @@ def evaluate(
         )
     ran = total - already
     result = {
-        "schema_version": rf.SCHEMA_VERSION,
-        "kind": rf.RESULT_KIND,
-        "agent": identity,
-        "suite": suite,
-        "base_seed": base_seed,
-        "split": split_of(base_seed),
-        "batch_size": batch_size,
-        "seed_derivation": SEED_DERIVATION,
-        **({"agent_seed_key": agent_key} if agent_key else {}),
-        **({"acting": "joint"} if joint else {}),
-        "versions": versions,
-        "run_key": run_key,
+        **head,
         "episodes_file": rf.episodes_path(out).name,
         "scenarios": scenarios_out,
         "timing": {
@@ -281,6 +261,47 @@ def evaluate(
     rf.write_results(out, result, all_episodes)
     log.remove()
     return result
+
+
+def result_head(
+    identity: dict[str, Any],
+    scenarios: list[tuple[ScenarioConfig, int]],
+    base_seed: int,
+    batch_size: int,
+    agent_key: str = "",
+    suite: str | None = None,
+    joint: bool = False,
+) -> dict[str, Any]:
+    """The provenance fields of a result (schema, kind, agent identity, suite, episodes' base
+    seed and split, batch size, seed derivation, the agent's seed key, the acting mode,
+    versions), in the order a result file holds them, and its ``run_key``: the digest of what
+    determines its records (the agent's identity, the scenarios' configurations and episode
+    counts, the base seed, the batch size, the versions and the agent's seed key)."""
+    versions = rf.package_versions()
+    scen_keys = [{"id": c.id, "config_hash": c.config_hash(), "episodes": n} for c, n in scenarios]
+    key = {
+        "schema_version": rf.SCHEMA_VERSION,
+        "agent": identity["sha256"],
+        "scenarios": scen_keys,
+        "base_seed": base_seed,
+        "batch_size": batch_size,
+        "versions": versions,
+        **({"agent_seed_key": agent_key} if agent_key else {}),
+    }
+    return {
+        "schema_version": rf.SCHEMA_VERSION,
+        "kind": rf.RESULT_KIND,
+        "agent": identity,
+        "suite": suite,
+        "base_seed": base_seed,
+        "split": split_of(base_seed),
+        "batch_size": batch_size,
+        "seed_derivation": SEED_DERIVATION,
+        **({"agent_seed_key": agent_key} if agent_key else {}),
+        **({"acting": "joint"} if joint else {}),
+        "versions": versions,
+        "run_key": rf.sha256_text(rf.canonical(key)),
+    }
 
 
 def scenario_entry(

@@ -29,11 +29,11 @@ from numpy.typing import NDArray
 from cdr_bench.actions import HOLD
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate import results as rf
-from cdr_bench.evaluate.api import SEED_DERIVATION, scenario_entry
+from cdr_bench.evaluate.api import result_head, scenario_entry
 from cdr_bench.evaluate.rollout import Decisions, fly
 from cdr_bench.evaluate.runner import encode_actions, run_batch
 from cdr_bench.evaluate.search import _follow_on_actions, follow_on_family
-from cdr_bench.evaluate.seeds import episode_seeds, split_of
+from cdr_bench.evaluate.seeds import episode_seeds
 from cdr_bench.scenarios.schema import ScenarioConfig
 from cdr_bench.sim.core import SUCCESS
 from cdr_bench.vector_env import VectorEnv
@@ -150,34 +150,10 @@ def headroom_result(
             print(
                 f"cdr-bench headroom: {config.id} {stop}/{n_episodes} episodes planned", flush=True
             )
-    identity = planner_identity()
-    versions = rf.package_versions()
-    scen = scenario_entry(config, base_seed, n_episodes, records)
-    run_key = rf.sha256_text(
-        rf.canonical(
-            {
-                "schema_version": rf.SCHEMA_VERSION,
-                "agent": identity["sha256"],
-                "scenarios": [{"id": config.id, "config_hash": chash, "episodes": n_episodes}],
-                "base_seed": base_seed,
-                "batch_size": batch_size,
-                "versions": versions,
-            }
-        )
-    )
     result = {
-        "schema_version": rf.SCHEMA_VERSION,
-        "kind": rf.RESULT_KIND,
-        "agent": identity,
-        "suite": None,
-        "base_seed": base_seed,
-        "split": split_of(base_seed),
-        "batch_size": batch_size,
-        "seed_derivation": SEED_DERIVATION,
-        "versions": versions,
-        "run_key": run_key,
+        **result_head(planner_identity(), [(config, n_episodes)], base_seed, batch_size),
         "episodes_file": rf.episodes_path(out).name,
-        "scenarios": [scen],
+        "scenarios": [scenario_entry(config, base_seed, n_episodes, records)],
         "timing": {
             "note": "not reproducible: excluded from result identity",
             "decision_latency": {config.id: None},

@@ -295,14 +295,9 @@ class LoadedAgent:
             for o, m in zip(observations, masks, strict=True)
         ]
 
-    def act_joint(
-        self,
-        observations: NDArray[np.float32],
-        masks: NDArray[np.int8],
-        episodes: NDArray[np.int64],
-        aircraft: NDArray[np.int64],
-    ) -> Any:
-        return self.instance.act_joint(observations, masks, episodes, aircraft)
+    def act_joint(self, *rows: NDArray[Any]) -> Any:
+        """``act_joint(observations, masks, episodes, aircraft)`` of the agent."""
+        return self.instance.act_joint(*rows)
 
     def reset(self, seed: int) -> None:
         if callable(self._reset):

@@ -69,6 +69,8 @@ DEFAULT_DECISION_TIMEOUT_S = 10.0
 MAX_TIMEOUT_S = 86400.0
 _HEAD = struct.Struct("<cI")
 _MAX_ERROR_BYTES = 16384
+Rows = NDArray[Any]
+"""One array per row of a decision (observations, masks, episode or aircraft index, actions)."""
 SPIN_S = 0.001
 """How long each side polls its pipe before it sleeps in ``select``: a decision or a step that
 takes less is picked up without the sleep and wake-up (0.1-0.4 ms per round trip here), at the
@@ -397,13 +399,7 @@ class RemoteAgent:
             )
         return actions
 
-    def act_joint(
-        self,
-        obs: NDArray[np.float32],
-        masks: NDArray[np.int8],
-        episodes: NDArray[np.int64],
-        aircraft: NDArray[np.int64],
-    ) -> NDArray[np.int64]:
+    def act_joint(self, obs: Rows, masks: Rows, episodes: Rows, aircraft: Rows) -> Rows:
         """(n,) actions for the rows of whole episodes: ``episodes`` (n,) says which episode of
         the call each row belongs to (rows of an episode together), ``aircraft`` (n,) which of
         its controlled aircraft it is (0: the ownship)."""

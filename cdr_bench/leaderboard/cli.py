@@ -130,17 +130,18 @@ def register(sub: Any) -> None:
     _add_headroom(lb_sub)
 
 
+HEADROOM_HELP = "plan the ranking's episodes with a planner that knows the traffic (unranked row)"
+HEADROOM_DESCRIPTION = (
+    "Fly every episode of the ranking's headline scenario (the committed entries' episodes: "
+    "their base seed and count) with the clairvoyant planner of cdr_bench/evaluate/headroom.py "
+    "and write leaderboard/headroom/<scenario>.json and its log: the unranked headroom row of "
+    "the leaderboard (re-render with `build`). The planner knows the traffic's future, so it is "
+    "not an agent and is never ranked; `build --check` replays its recorded decisions."
+)
+
+
 def _add_headroom(lb_sub: Any) -> None:
-    h = lb_sub.add_parser(
-        "headroom",
-        help="plan the ranking's episodes with a planner that knows the traffic (unranked row)",
-        description="Fly every episode of the ranking's headline scenario (the committed "
-        "entries' episodes: their base seed and count) with the clairvoyant planner of "
-        "cdr_bench/evaluate/headroom.py and write leaderboard/headroom/<scenario>.json and its "
-        "log: the unranked headroom row of the leaderboard (re-render with `build`). The "
-        "planner knows the traffic's future, so it is not an agent and is never ranked; "
-        "`build --check` replays its recorded decisions.",
-    )
+    h = lb_sub.add_parser("headroom", help=HEADROOM_HELP, description=HEADROOM_DESCRIPTION)
     _add_dir(h)
     h.add_argument(
         "--reference",
