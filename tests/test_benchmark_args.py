@@ -51,3 +51,14 @@ def test_gpu_check_refuses_bad_arguments_in_one_line() -> None:
     r = _run("gpu_check", "--algorithms", "dqn")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "invalid choice: 'dqn'" in r.stderr
+
+
+def test_latency_refuses_bad_arguments_in_one_line() -> None:
+    r = _run("latency", "--episodes", "0")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "argument --episodes: expected a whole number >= 1, got 0" in r.stderr
+    r = _run("latency", "--entries", "nobody")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "--entries: no single-agent entry nobody" in r.stderr
+    r = _run("latency", "--json", "/dev/null")
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "--json" in r.stderr
