@@ -44,21 +44,20 @@ def test_zero_rounds(script: str) -> None:
     assert f"argument {flag}: expected a whole number >= 1, got 0" in r.stderr
 
 
-def test_gpu_check_refuses_bad_arguments_in_one_line() -> None:
-    r = _run("gpu_check", "--updates", "0")
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "argument --updates: expected a whole number >= 1, got 0" in r.stderr
-    r = _run("gpu_check", "--algorithms", "dqn")
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "invalid choice: 'dqn'" in r.stderr
+WHOLE = "expected a whole number >= 1, got 0"
 
 
-def test_latency_refuses_bad_arguments_in_one_line() -> None:
-    r = _run("latency", "--episodes", "0")
+@pytest.mark.parametrize(
+    ("script", "args", "message"),
+    [
+        ("gpu_check", ("--updates", "0"), f"argument --updates: {WHOLE}"),
+        ("gpu_check", ("--algorithms", "dqn"), "invalid choice: 'dqn'"),
+        ("latency", ("--episodes", "0"), f"argument --episodes: {WHOLE}"),
+        ("latency", ("--entries", "nobody"), "--entries: no single-agent entry nobody"),
+        ("latency", ("--json", "/dev/null"), "--json /dev/null"),
+    ],
+)
+def test_bad_arguments_end_in_one_line(script: str, args: tuple[str, ...], message: str) -> None:
+    r = _run(script, *args)
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "argument --episodes: expected a whole number >= 1, got 0" in r.stderr
-    r = _run("latency", "--entries", "nobody")
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "--entries: no single-agent entry nobody" in r.stderr
-    r = _run("latency", "--json", "/dev/null")
-    assert r.returncode == 2 and "Traceback" not in r.stderr and "--json" in r.stderr
+    assert message in r.stderr, r.stderr
