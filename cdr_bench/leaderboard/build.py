@@ -8,17 +8,17 @@
   gives (:func:`.plots.render_plots`); only the plots that show what changed are redrawn.
 * ``build --evaluate``: first evaluate (and map the first-action distribution and record the
   replayed episodes where a submission asks) every submission (or the named ones), then
-  render. Each submission is scored
-  by a trusted child process (:mod:`.entry`: simulator, runner, result files) while its agent
-  runs in another process confined by bubblewrap (:mod:`cdr_bench.evaluate.sandbox`: read-only
-  view of the repository with this folder hidden, private scratch, no network, own PID
-  namespace, CPU and memory limits); the two exchange only observations and actions.
-* ``build --check``: re-evaluate every submission into a scratch folder and compare with the
-  committed result files, then re-render from the committed results and compare with the
-  committed pages; exit code 1 and a readable diff if anything differs. Writes nothing.
-  Submissions run side by side (``--workers`` at a time, one process each: no timing is
-  compared, so they may share the cores). CI checks a fixed sample, the first batch of every
-  scenario (``--check --episodes 200``); plain ``--check`` re-runs every committed episode.
+  render. Each submission is scored by a trusted child process (:mod:`.entry`: simulator,
+  runner, result files; itself confined where it can be, :mod:`.scorer_box`) while its agent
+  runs in another process confined by bubblewrap (:mod:`cdr_bench.evaluate.sandbox`: only the
+  agent's files visible, read-only, private scratch, no network, own PID namespace, CPU and
+  memory limits); the two exchange only observations and actions.
+* ``build --check``: replay every committed episode from its recorded decisions (exact,
+  :mod:`.verify`), ask each entry's agent again along a random sample of committed episodes
+  and fly it on fresh episodes drawn now, then re-render from the committed results and
+  compare with the committed pages; exit code 1 and a readable diff if anything differs.
+  Writes nothing. Submissions run side by side (``--workers`` at a time, one process each:
+  no timing is compared, so they may share the cores).
 
 All-or-nothing: everything is produced in a staging folder inside the leaderboard folder (hidden
 from every agent); only when every submission succeeded and every page rendered are the files
@@ -62,6 +62,7 @@ from cdr_bench.evaluate.loader import agent_files, check_module_names, resolve_a
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.evaluate.runner import DEFAULT_BATCH_SIZE
 from cdr_bench.evaluate.sandbox import (
+    Cgroup,
     Confinement,
     Limits,
     SandboxError,
@@ -88,6 +89,7 @@ from cdr_bench.leaderboard.data import (
 )
 from cdr_bench.leaderboard.multi_agent import track_data
 from cdr_bench.leaderboard.published import load_published
+from cdr_bench.leaderboard.scorer_box import scorer_box, scorer_isolation
 from cdr_bench.leaderboard.submission import (
     TRACK_EPISODES,
     TRACKS,
@@ -233,12 +235,13 @@ def run_child(
     env: dict[str, str] | None = None,
     limits: Limits | None = None,
     pass_fds: tuple[int, ...] = (),
+    cgroup: Cgroup | None = None,
 ) -> float:
     """Run ``argv`` in its own session with a wall-clock limit (then its whole process group is
-    killed); returns the wall time. The child gets ``SIGKILL`` when this process dies
-    (:func:`~cdr_bench.evaluate.sandbox.child_setup`), ``kill -9`` included, and passes that
-    on to what it starts. :class:`SandboxError` naming ``what`` when it fails, with its last
-    output (control characters removed)."""
+    killed), in ``cgroup`` when given; returns the wall time. The child
+    gets ``SIGKILL`` when this process dies (:func:`~cdr_bench.evaluate.sandbox.child_setup`),
+    ``kill -9`` included, and passes that on to what it starts. :class:`SandboxError` naming
+    ``what`` when it fails, with its last output (control characters removed)."""
     import signal
     import subprocess
 
@@ -255,7 +258,7 @@ def run_child(
             stderr=err,
             start_new_session=True,
             pass_fds=pass_fds,
-            preexec_fn=child_setup(limits),
+            preexec_fn=child_setup(limits, cgroup=cgroup),
         )
         try:
             code = proc.wait(timeout=wall_s)
@@ -350,15 +353,23 @@ def evaluate_submission(
             )
         finally:
             safe.close()
+    # Confined (where it can be, :mod:`.scorer_box`), the scorer writes only into a scratch
+    # folder of its own; what it wrote is moved to where the build expects it afterwards.
+    sbox = scorer_box(env, root)
+    work = sbox.scratch if sbox is not None else scratch
     out = result_path(out_dir, sub.name)
+    out_w = result_path(work / "out", sub.name) if sbox is not None else out
     mm = [
         {
             "scenario": sc,
-            "out": str((scratch / f"multimodal-{sc.replace('/', '_')}.json").resolve()),
+            "out": str((work / f"multimodal-{sc.replace('/', '_')}.json").resolve()),
         }
         for sc in sub.multimodality
     ]
-    replays = (scratch / "replays.json").resolve()
+    replays = (work / "replays.json").resolve()
+    rerun_w = rerun
+    if rerun is not None and sbox is not None:
+        rerun_w = {**rerun, "out": str(work / "agreement.json")}
     spec = {
         "agent": sub.agent,
         "scenarios": [] if sub.suite else list(sub.scenarios),
@@ -367,7 +378,7 @@ def evaluate_submission(
         "seed": BASE_SEED,
         "batch_size": DEFAULT_BATCH_SIZE,
         "workers": workers,
-        "out": str(out.resolve()),
+        "out": str(out_w.resolve()),
         "root": str(root.resolve()),
         "hidden": [str(lb_dir)],
         "limits": {"cpu_s": limits.cpu_s, "memory_mb": limits.memory_mb, "wall_s": limits.wall_s},
@@ -378,41 +389,56 @@ def evaluate_submission(
             "episodes": REPLAY_EPISODES[sub.track],
             "out": str(replays),
         },
-        "rerun": rerun,
+        "rerun": rerun_w,
         # the agent's reset seeds are derived with a secret drawn now (recorded in the result
         # when the run is over): they do not tell the agent which public episodes it flies
         "agent_key": secrets.token_hex(16) if rerun is None else "",
     }
-    spec_file = scratch / "spec.json"
-    spec_file.parent.mkdir(parents=True, exist_ok=True)
-    spec_file.write_text(json.dumps(spec, indent=1), encoding="utf-8")
-    # -I: isolated mode, nothing of the working directory (the repository root: relative paths
-    # in the spec and in the result are relative to it) or of PYTHON* variables on the path
-    wall += run_child(
-        [py, "-I", "-m", "cdr_bench.leaderboard.entry", str(spec_file.resolve())],
-        what=what,
-        cwd=root,
-        log_dir=scratch / "entry-log",
-        wall_s=limits.wall_s,
-        env=env,
-    )
-    if rerun is None:
-        try:
-            result = read_result(out, metrics=False)
-        except ValueError as e:
-            raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
-        expected = current_identity(sub, root)["sha256"]
-        if result["agent"]["sha256"] != expected:
-            raise SandboxError(
-                f"{what}: the result names agent {result['agent']['sha256'][:12]}, the "
-                f"submission's files hash to {expected[:12]} (files changed during the run?)"
-            )
-    for m in mm:
-        load_multimodal(Path(m["out"]))  # refuses garbage
-        shutil.copyfile(m["out"], multimodal_path(out_dir, sub.name, m["scenario"]))
-    if sub.replays:
-        load_replays(replays, sub)  # refuses garbage
-        shutil.copyfile(replays, replays_path(out_dir, sub.name))
+    try:
+        spec_file = work / "spec.json"
+        spec_file.parent.mkdir(parents=True, exist_ok=True)
+        spec_file.write_text(json.dumps(spec, indent=1), encoding="utf-8")
+        # -I: isolated mode, nothing of the working directory (the repository root: relative
+        # paths in the spec and in the result are relative to it) or of PYTHON* variables on
+        # the path
+        argv = [py, "-I", "-m", "cdr_bench.leaderboard.entry", str(spec_file.resolve())]
+        wall += run_child(
+            argv if sbox is None else [*sbox.prefix, *argv],
+            what=what,
+            cwd=root,
+            log_dir=scratch / "entry-log",
+            wall_s=limits.wall_s,
+            env=env if sbox is None else sbox.env,
+            cgroup=None if sbox is None else sbox.cgroup,
+        )
+        if sbox is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            for f in (out_w, out_w.with_suffix(".jsonl.xz")):
+                if f.exists():
+                    shutil.copyfile(f, out.with_name(f.name))
+            if rerun is not None and rerun_w is not None and Path(rerun_w["out"]).exists():
+                Path(rerun["out"]).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(rerun_w["out"], rerun["out"])
+        if rerun is None:
+            try:
+                result = read_result(out, metrics=False)
+            except ValueError as e:
+                raise SandboxError(f"{what}: the evaluation wrote no usable result ({e})") from None
+            expected = current_identity(sub, root)["sha256"]
+            if result["agent"]["sha256"] != expected:
+                raise SandboxError(
+                    f"{what}: the result names agent {result['agent']['sha256'][:12]}, the "
+                    f"submission's files hash to {expected[:12]} (files changed during the run?)"
+                )
+        for m in mm:
+            load_multimodal(Path(m["out"]))  # refuses garbage
+            shutil.copyfile(m["out"], multimodal_path(out_dir, sub.name, m["scenario"]))
+        if sub.replays:
+            load_replays(replays, sub)  # refuses garbage
+            shutil.copyfile(replays, replays_path(out_dir, sub.name))
+    finally:
+        if sbox is not None:
+            sbox.close()
     return wall
 
 
@@ -505,7 +531,8 @@ def _evaluate_all(
     log(
         f"{what} {len(subs)} submission(s), {per}, {how}; limits: "
         f"{opts.limits.cpu_s} CPU s and {opts.limits.memory_mb} MiB per agent process, "
-        f"{opts.limits.wall_s:g} s wall per submission; agents {iso}"
+        f"{opts.limits.wall_s:g} s wall per submission; agents {iso}; "
+        f"{scorer_isolation(str(root.resolve()))[1]}"
     )
     t0 = time.perf_counter()
 

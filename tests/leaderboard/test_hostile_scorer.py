@@ -95,6 +95,68 @@ def test_module_planted_at_the_root_is_not_imported_by_the_scorer(tmp_path: Path
     assert not marker.exists(), marker.read_text()
 
 
+SCORER_TRIES = textwrap.dedent(
+    """
+    import os, socket, sys
+    root, scratch = sys.argv[1], sys.argv[2]
+    out = []
+    for path in (os.path.join(root, "planted"), "/etc/planted", os.path.join(scratch, "ok")):
+        try:
+            open(path, "w").close()
+            out.append("wrote " + path)
+        except OSError as e:
+            out.append("refused " + path)
+    try:
+        socket.create_connection(("1.1.1.1", 53), timeout=2)
+        out.append("network")
+    except OSError:
+        out.append("no network")
+    caps = [x for x in open("/proc/self/status") if x.startswith("CapEff")][0].split()[1]
+    out.append("caps " + caps)
+    print("|".join(out))
+    """
+)
+
+
+def test_the_scorer_runs_confined_and_says_so(tmp_path: Path) -> None:
+    """The scorer itself (trusted code reading submitted files) runs in a bubblewrap sandbox of
+    its own: it can write its scratch folder only, has no network and no capability; the build
+    says so, and what it wrote there is removed with the box."""
+    import os
+
+    from cdr_bench.leaderboard.scorer_box import scorer_box, scorer_isolation
+
+    root = tmp_path / "repo"
+    lb = make_repo(root)
+    (lb / "submissions" / "weave.yaml").unlink()
+    confined, why = scorer_isolation(str(root))
+    assert confined, why
+    box = scorer_box(dict(os.environ), root)
+    assert box is not None
+    try:
+        r = subprocess.run(
+            [*box.prefix, sys.executable, "-I", "-c", SCORER_TRIES, str(root), str(box.scratch)],
+            capture_output=True,
+            text=True,
+            env=box.env,
+            timeout=120,
+        )
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.strip().split("|") == [
+            f"refused {root / 'planted'}",
+            "refused /etc/planted",
+            f"wrote {box.scratch / 'ok'}",
+            "no network",
+            "caps 0000000000000000",
+        ]
+    finally:
+        box.close()
+    assert not box.scratch.exists() and not (root / "planted").exists()
+    r = build(root, "--evaluate", "--episodes", 2, "--reference", "direct")
+    assert r.returncode == 0, r.stderr
+    assert "scorer confined (bubblewrap" in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize("name", ["numpy.py", "json.py", "cdr_bench.py"])
 def test_agent_module_shadowing_a_real_one_is_refused(tmp_path: Path, name: str) -> None:
     root = tmp_path / "repo"
