@@ -14,12 +14,15 @@ same ``--episodes`` validation episodes of ``high``:
   in this process (its own compute, without the process boundary): the setting of the
   paper's latency figure (Diffusion-AC 8.3 ms per decision on an RTX 4090).
 
+The leaderboard's latency claim (Diffusion-AC slower per decision than the paper's baselines)
+reads the single-decision medians of this run's JSON, ``leaderboard/latency.json``.
+
 The batched figure includes the process boundary (a pipe round trip per call, shared by the
 call's decisions), as the evaluator sees it.
 Printed with the conditions: CPU, Python, threads and the load average before and after. Run
 it with nothing else running.
 
-Run: ``python benchmarks/latency.py [--episodes 200] [--json benchmarks/latency.json]``
+Run: ``python benchmarks/latency.py [--episodes 200] [--json leaderboard/latency.json]``
 """
 
 from __future__ import annotations

@@ -34,8 +34,10 @@ exactly as it was). Pages byte for byte; PNGs (and the images inside ``index.htm
 this machine's matplotlib is the version that rendered them, otherwise their data is still
 compared through ``leaderboard.json`` and a note says so; ``--check`` draws every plot (it never
 reuses a committed PNG) and does not compare ``plots/manifest.json`` (a record of what the
-plots were drawn from, not an output). Latency shown on the pages comes from the committed
-result files and is never re-measured by ``--check``.
+plots were drawn from, not an output). Latency is never re-measured by ``--check``: the
+tables' latency columns come from the committed result files (measured while each entry was
+scored), the latency claim from ``latency.json`` (one controlled run of
+``benchmarks/latency.py``).
 """
 
 from __future__ import annotations
@@ -81,6 +83,7 @@ from cdr_bench.leaderboard.data import (
     headroom_data,
     headroom_path,
     load_entries,
+    load_latency,
     load_multimodal,
     load_replays,
     multimodal_path,
@@ -190,7 +193,7 @@ def render_all(
     subs = load_submissions(lb_dir, published.names)
     entries = load_entries(subs, results_dir)
     single = [e for e in entries if e.sub.track == "single-agent"]
-    data = build_data(single, published, reference, load_study(lb_dir))
+    data = build_data(single, published, reference, load_study(lb_dir), load_latency(lb_dir))
     data["headroom"] = headroom_data(headroom_path(lb_dir), single, data["ranking"])
     multi = [e for e in entries if e.sub.track == "multi-agent"]
     data["multi_agent"] = track_data(multi)

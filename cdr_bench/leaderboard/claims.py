@@ -209,7 +209,8 @@ def build_claims(
 ) -> list[dict[str, Any]]:
     """``by_row``: published row -> Entry; ``paired.metric(a, b, sid, metric)``: the paired
     difference b - a; ``multimodal``: (entry, scenario) -> mean successful families;
-    ``latency``: entry -> median ms per decision on :data:`SCENARIO`; ``sensitivity``: the
+    ``latency``: entry -> median ms of one decision per call in the controlled latency run
+    (:func:`cdr_bench.leaderboard.data.load_latency`); ``sensitivity``: the
     Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it);
     ``training``: entry -> ``(fixed-set curve, transitions)`` of each seed that logged one;
     ``budgets``: entry -> its training transitions (an int, ``[min, max]`` when its seeds
@@ -475,7 +476,8 @@ def build_claims(
         ok = all(v is not None and latency[dac.name] > v for v in others.values())
         add("latency", "Diffusion-AC is the slowest per decision (8.3 ms vs 0.6-7 ms)",
             "§5.2.3, Fig. 6", "8.3 ms (RTX 4090)",
-            f"median ms per decision on this CPU: Diffusion-AC {latency[dac.name]:.3g}, "
+            f"median ms of one decision per call in one controlled run "
+            f"(`latency.json`, which names its CPU): Diffusion-AC {latency[dac.name]:.3g}, "
             + ", ".join(f"{r} {v:.3g}" for r, v in others.items() if v is not None),
             HELD if ok else NOT_HELD, "order of the medians (machine-dependent)")  # fmt: skip
     return out

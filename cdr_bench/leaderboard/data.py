@@ -53,7 +53,6 @@ from cdr_bench.evaluate.compare import compare, holm, scenario_indices, scenario
 from cdr_bench.evaluate.loader import agent_identity
 from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.evaluate.results import SCHEMA_VERSION, log_text, read_episodes, read_result
-from cdr_bench.leaderboard.claims import SCENARIO as CLAIMS_SCENARIO
 from cdr_bench.leaderboard.claims import build_claims
 from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
@@ -878,16 +877,51 @@ def entry_facts(e: Entry) -> dict[str, Any]:
     }
 
 
+LATENCY_FILE = "latency.json"
+"""``<leaderboard>/latency.json``: every single-agent entry's decision latency measured in one
+controlled run (``python benchmarks/latency.py --json leaderboard/latency.json``: one after the
+other, one thread, nothing else running, the conditions recorded in it)."""
+
+
+def load_latency(lb_dir: Path) -> dict[str, float]:
+    """Entry -> median ms of one decision per call, from :data:`LATENCY_FILE` (empty without
+    it); a :class:`UserError` naming the file and field for anything else."""
+    path = Path(lb_dir) / LATENCY_FILE
+    if not path.exists():
+        return {}
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise UserError(f"{path}: cannot read ({e})") from None
+    rows = d.get("rows") if isinstance(d, dict) else None
+    if not isinstance(rows, list):
+        raise UserError(f"{path}: expected an object with a list 'rows'")
+    out: dict[str, float] = {}
+    for i, r in enumerate(rows):
+        med = r.get("single_ms", {}).get("median") if isinstance(r, dict) else None
+        if not isinstance(r.get("entry") if isinstance(r, dict) else None, str) or not (
+            isinstance(med, (int, float)) and math.isfinite(med) and med > 0
+        ):
+            raise UserError(
+                f"{path}: rows[{i}]: expected an entry name and single_ms.median, a positive "
+                "number of ms"
+            )
+        out[r["entry"]] = float(med)
+    return out
+
+
 def build_data(
     entries: list[Entry],
     published: Published,
     reference: str = DEFAULT_REFERENCE,
     sensitivity: dict[str, Any] | None = None,
+    latency: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """Everything the pages show, as one JSON-able dict (deterministic: no timestamps). The
     recorded trajectories are not in it (they are drawn by ``index.html`` from the replay
     files); ``replays`` says which exist. ``sensitivity``: the study of
-    :func:`cdr_bench.leaderboard.sensitivity.load_study` (None: no such section)."""
+    :func:`cdr_bench.leaderboard.sensitivity.load_study` (None: no such section);
+    ``latency``: :func:`load_latency` (the latency claim; none without it)."""
     by_name = {e.name: e for e in entries}
     ref = by_name.get(reference)
     if ref is None:
@@ -1048,13 +1082,7 @@ def build_data(
                 for sc, d in e.multimodal.items()
                 if d.get("families_mean") is not None
             },
-            {
-                e.name: e.result["timing"]["decision_latency"][CLAIMS_SCENARIO]["per_decision_ms"][
-                    "median"
-                ]
-                for e in entries
-                if CLAIMS_SCENARIO in e.result["timing"]["decision_latency"]
-            },
+            latency or {},
             sensitivity,
             {e.name: _fixed_runs(e, info[e.name]) for e in entries},
             {e.name: (info[e.name][0] or {}).get("transitions") for e in entries},

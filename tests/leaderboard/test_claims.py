@@ -200,3 +200,36 @@ def test_dpsc_convergence_measured_with_three_seeds_of_each() -> None:
     assert verdict(runs_s, runs_f)["verdict"] == "not held"  # DPSC slower
     few = verdict(runs_f[:2], runs_s)
     assert few["verdict"] == "not measured" and "Diffusion-AC (Complete) 2" in few["measured"]
+
+
+def test_latency_claim_reads_the_controlled_run(tmp_path: Path) -> None:
+    """The latency claim is judged on the single-decision medians of ``latency.json`` (one
+    controlled run), not on the timing each result file recorded while it was scored; the
+    committed pages state what the committed controlled run measured."""
+    import json
+
+    from cdr_bench.errors import UserError
+    from cdr_bench.leaderboard.data import load_latency
+
+    assert load_latency(tmp_path) == {}  # no controlled run: no latency claim
+    rates = {"success_rate": 0.9, "los_rate": 0.1, "nmac_rate": 0.05, "clean_success_rate": 0.85}
+    rows = {r: FakeEntry(r.lower(), dict(rates)) for r in (cl.DIFFUSION, *cl.BASELINES)}
+    assert "latency" not in {c["id"] for c in cl.build_claims(rows, FakePaired(), PUB, {}, {})}
+    slow = {e.name: 0.01 for e in rows.values()} | {rows[cl.DIFFUSION].name: 0.2}
+    claim = {c["id"]: c for c in cl.build_claims(rows, FakePaired(), PUB, {}, slow)}["latency"]
+    assert claim["verdict"] == "held" and "controlled run" in claim["measured"]
+    fast = slow | {rows[cl.DIFFUSION].name: 0.001}
+    claim = {c["id"]: c for c in cl.build_claims(rows, FakePaired(), PUB, {}, fast)}["latency"]
+    assert claim["verdict"] == "not held"
+
+    (tmp_path / "latency.json").write_text(json.dumps({"rows": [{"entry": "x"}]}))
+    with pytest.raises(UserError, match=r"latency.json: rows\[0\]: expected"):
+        load_latency(tmp_path)
+    (tmp_path / "latency.json").write_text("[1, 2")
+    with pytest.raises(UserError, match="latency.json: cannot read"):
+        load_latency(tmp_path)
+
+    committed = load_latency(ROOT / "leaderboard")
+    page = json.loads((ROOT / "leaderboard" / "leaderboard.json").read_text())
+    text = next(c for c in page["claims"] if c["id"] == "latency")["measured"]
+    assert f"Diffusion-AC {committed['diffusion-ac']:.3g}," in text
