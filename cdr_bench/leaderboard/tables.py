@@ -156,6 +156,23 @@ class Repo:
                 ) from None
         return self._results[name]
 
+    def seed_results(self, name: str) -> list[tuple[int | None, dict[str, Any]]]:
+        """``(seed, result)`` of every training seed of an entry, its ``checkpoint`` first
+        (``results/<name>.json``), then the others (``results/<name>.seed-<k>.json``); one
+        ``(None, result)`` for an entry without seeds."""
+        sub = self.submission(name)
+        runs: list[tuple[int | None, dict[str, Any]]] = [(sub.seed, self.result(name))]
+        for view in sub.seed_views():
+            seed = int(view.name.rsplit("-", 1)[1])
+            try:
+                res = read_result(result_path(self.results_dir, view.name))
+            except ValueError as e:
+                raise UserError(
+                    f"{e}; run `cdr-bench leaderboard build --evaluate {name}`"
+                ) from None
+            runs.append((seed, res))
+        return runs
+
     def paper_rows(self, name: str) -> list[PaperRow]:
         """The paper's rows the entry reproduces (its ``published_as``), one per density."""
         rows = self.submission(name).published_as
@@ -433,6 +450,21 @@ def measured(
     )
 
 
+def measured_seeds(
+    repo: Repo, entries: Iterable[str], scenarios: Sequence[str] | None = None
+) -> str:
+    """Every training seed of each entry, one row per seed and scenario (the leaderboard's
+    per-seed result files; an entry without seeds is one row)."""
+    return measured_table(
+        [
+            (repo.label(n) if seed is None else f"{repo.label(n)}, seed {seed}", res, [])
+            for n in entries
+            for seed, res in repo.seed_results(n)
+        ],
+        scenarios,
+    )
+
+
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
     return multimodality_table([run for n in entries for run in repo.multimodal(n)])
 
@@ -549,6 +581,7 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
             ]
         ),
         "latency": lambda r: latency_detail_table(r.latency("diffusion-ac")),
+        "ablation-seeds": lambda r: measured_seeds(r, ABLATIONS, ["high"]),
     },
 }
 """File (relative to the repository root) -> block name -> what renders it."""
