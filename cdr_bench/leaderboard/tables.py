@@ -583,6 +583,9 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
         "latency": lambda r: latency_detail_table(r.latency("diffusion-ac")),
         "ablation-seeds": lambda r: measured_seeds(r, ABLATIONS, ["high"]),
     },
+    "agents/mvp_improve/README.md": {
+        "seeds": lambda r: measured_seeds(r, ["mvp-improve", "mvp-improve-2", "mvp"], ["high"]),
+    },
 }
 """File (relative to the repository root) -> block name -> what renders it."""
 
