@@ -38,6 +38,7 @@ from typing import Any
 
 from cdr_bench.actions import decode
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.metrics import SYSTEM_METRICS
 from cdr_bench.evaluate.report import Cell, Rows, fmt_metric, fmt_ms, fmt_value, md_table
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.jsonl import GZ, existing, gunzip_file
@@ -273,6 +274,25 @@ def measured_table(
     return md_table(head, rows, numeric_from=2)
 
 
+def system_table(
+    entries: Iterable[tuple[str, dict[str, Any]]], scenarios: Sequence[str] | None = None
+) -> str:
+    """System metrics (every controlled aircraft, docs/model.md §10.1.3) of results
+    (``(label, result)``), one row per result and scenario that has them, with 95 % intervals."""
+    head = ["agent", "scenario", "episodes", "flights", *[c.header for c in SYSTEM_METRICS]]
+    rows: Rows = []
+    for label, res in entries:
+        for sc in res["scenarios"]:
+            m = sc.get("system_metrics")
+            if not m or (scenarios is not None and sc["id"] not in scenarios):
+                continue
+            rows.append(
+                [Cell(label), Cell(sc["id"]), Cell(str(m["episodes"])), Cell(str(m["flights"]))]
+                + [Cell(fmt_metric(c.kind, m[c.key])) for c in SYSTEM_METRICS]
+            )
+    return md_table(head, rows, numeric_from=2)
+
+
 _PSI = {-1: "left", 0: "hold", 1: "right"}
 _V = {-1: "slower", 0: "keep", 1: "faster"}
 _H = {-1: "descend", 0: "level", 1: "climb"}
@@ -450,19 +470,27 @@ def measured(
     )
 
 
+def seed_runs(repo: Repo, entries: Iterable[str]) -> list[tuple[str, dict[str, Any]]]:
+    """``(label, result)`` of every training seed of each entry (the leaderboard's per-seed
+    result files; an entry without seeds is one run, labelled with its name alone)."""
+    return [
+        (repo.label(n) if seed is None else f"{repo.label(n)}, seed {seed}", res)
+        for n in entries
+        for seed, res in repo.seed_results(n)
+    ]
+
+
 def measured_seeds(
     repo: Repo, entries: Iterable[str], scenarios: Sequence[str] | None = None
 ) -> str:
-    """Every training seed of each entry, one row per seed and scenario (the leaderboard's
-    per-seed result files; an entry without seeds is one row)."""
-    return measured_table(
-        [
-            (repo.label(n) if seed is None else f"{repo.label(n)}, seed {seed}", res, [])
-            for n in entries
-            for seed, res in repo.seed_results(n)
-        ],
-        scenarios,
-    )
+    """Every training seed of each entry, one row per seed and scenario."""
+    return measured_table([(label, res, []) for label, res in seed_runs(repo, entries)], scenarios)
+
+
+def system_seeds(repo: Repo, entries: Iterable[str]) -> str:
+    """The system metrics of every training seed of each entry, one row per seed and
+    scenario."""
+    return system_table(seed_runs(repo, entries))
 
 
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
@@ -586,6 +614,8 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
     "agents/mvp_improve/README.md": {
         "seeds": lambda r: measured_seeds(r, ["mvp-improve", "mvp-improve-2", "mvp"], ["high"]),
     },
+    "agents/ippo/README.md": {"seeds": lambda r: system_seeds(r, ["ippo", "mvp-all"])},
+    "agents/mappo/README.md": {"seeds": lambda r: system_seeds(r, ["mappo", "mvp-all"])},
 }
 """File (relative to the repository root) -> block name -> what renders it."""
 
