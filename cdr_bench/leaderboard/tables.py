@@ -38,6 +38,7 @@ from typing import Any
 
 from cdr_bench.actions import decode
 from cdr_bench.errors import UserError
+from cdr_bench.evaluate.metrics import SYSTEM_METRICS
 from cdr_bench.evaluate.report import Cell, Rows, fmt_metric, fmt_ms, fmt_value, md_table
 from cdr_bench.evaluate.results import atomic_write_text, read_result
 from cdr_bench.jsonl import GZ, existing, gunzip_file
@@ -156,6 +157,23 @@ class Repo:
                 ) from None
         return self._results[name]
 
+    def seed_results(self, name: str) -> list[tuple[int | None, dict[str, Any]]]:
+        """``(seed, result)`` of every training seed of an entry, its ``checkpoint`` first
+        (``results/<name>.json``), then the others (``results/<name>.seed-<k>.json``); one
+        ``(None, result)`` for an entry without seeds."""
+        sub = self.submission(name)
+        runs: list[tuple[int | None, dict[str, Any]]] = [(sub.seed, self.result(name))]
+        for view in sub.seed_views():
+            seed = int(view.name.rsplit("-", 1)[1])
+            try:
+                res = read_result(result_path(self.results_dir, view.name))
+            except ValueError as e:
+                raise UserError(
+                    f"{e}; run `cdr-bench leaderboard build --evaluate {name}`"
+                ) from None
+            runs.append((seed, res))
+        return runs
+
     def paper_rows(self, name: str) -> list[PaperRow]:
         """The paper's rows the entry reproduces (its ``published_as``), one per density."""
         rows = self.submission(name).published_as
@@ -253,6 +271,25 @@ def measured_table(
                         ]
                         + [Cell(fmt_published(c.kind, p.values.get(c.key))) for c in MAIN_COLUMNS]
                     )
+    return md_table(head, rows, numeric_from=2)
+
+
+def system_table(
+    entries: Iterable[tuple[str, dict[str, Any]]], scenarios: Sequence[str] | None = None
+) -> str:
+    """System metrics (every controlled aircraft, docs/model.md §10.1.3) of results
+    (``(label, result)``), one row per result and scenario that has them, with 95 % intervals."""
+    head = ["agent", "scenario", "episodes", "flights", *[c.header for c in SYSTEM_METRICS]]
+    rows: Rows = []
+    for label, res in entries:
+        for sc in res["scenarios"]:
+            m = sc.get("system_metrics")
+            if not m or (scenarios is not None and sc["id"] not in scenarios):
+                continue
+            rows.append(
+                [Cell(label), Cell(sc["id"]), Cell(str(m["episodes"])), Cell(str(m["flights"]))]
+                + [Cell(fmt_metric(c.kind, m[c.key])) for c in SYSTEM_METRICS]
+            )
     return md_table(head, rows, numeric_from=2)
 
 
@@ -433,6 +470,29 @@ def measured(
     )
 
 
+def seed_runs(repo: Repo, entries: Iterable[str]) -> list[tuple[str, dict[str, Any]]]:
+    """``(label, result)`` of every training seed of each entry (the leaderboard's per-seed
+    result files; an entry without seeds is one run, labelled with its name alone)."""
+    return [
+        (repo.label(n) if seed is None else f"{repo.label(n)}, seed {seed}", res)
+        for n in entries
+        for seed, res in repo.seed_results(n)
+    ]
+
+
+def measured_seeds(
+    repo: Repo, entries: Iterable[str], scenarios: Sequence[str] | None = None
+) -> str:
+    """Every training seed of each entry, one row per seed and scenario."""
+    return measured_table([(label, res, []) for label, res in seed_runs(repo, entries)], scenarios)
+
+
+def system_seeds(repo: Repo, entries: Iterable[str]) -> str:
+    """The system metrics of every training seed of each entry, one row per seed and
+    scenario."""
+    return system_table(seed_runs(repo, entries))
+
+
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
     return multimodality_table([run for n in entries for run in repo.multimodal(n)])
 
@@ -549,7 +609,13 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
             ]
         ),
         "latency": lambda r: latency_detail_table(r.latency("diffusion-ac")),
+        "ablation-seeds": lambda r: measured_seeds(r, ABLATIONS, ["high"]),
     },
+    "agents/mvp_improve/README.md": {
+        "seeds": lambda r: measured_seeds(r, ["mvp-improve", "mvp-improve-2", "mvp"], ["high"]),
+    },
+    "agents/ippo/README.md": {"seeds": lambda r: system_seeds(r, ["ippo", "mvp-all"])},
+    "agents/mappo/README.md": {"seeds": lambda r: system_seeds(r, ["mappo", "mvp-all"])},
 }
 """File (relative to the repository root) -> block name -> what renders it."""
 
