@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.metrics import BOOTSTRAP_SEED, SYSTEM_METRICS, get_metric
+from cdr_bench.leaderboard.page_tables import signed
 from cdr_bench.leaderboard.submission import TRACK_HEADLINE
 
 if TYPE_CHECKING:
@@ -249,7 +250,7 @@ def _pct(x: float) -> str:
 
 def _pp(d: dict[str, Any]) -> str:
     lo, hi = d["ci95"]
-    return f"{100 * d['diff']:+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}]"
+    return f"{signed(100 * d['diff'])} points [{signed(100 * lo)}, {signed(100 * hi)}]"
 
 
 def conclusion(track: dict[str, Any], names: dict[str, str]) -> list[str]:
@@ -288,9 +289,10 @@ def conclusion(track: dict[str, Any], names: dict[str, str]) -> list[str]:
         b = next(r for r in rows if r["entry"] == base)
         los, los_b = (x["side"]["system_los_per_flight_hour"] for x in (best, b))
         delay, delay_b = (x["side"]["system_delay_s"] for x in (best, b))
-        fewer = "fewer" if los < los_b else "not fewer"
+        fewer = "fewer" if los < los_b else "more" if los > los_b else "as many"
+        than = "as" if fewer == "as many" else "than"
         out.append(
-            f"Per flight hour it has {fewer} losses of separation than {names[base]} "
+            f"Per flight hour it has {fewer} losses of separation {than} {names[base]} "
             f"({los:.3g} vs {los_b:.3g}), and its successful flights take {delay:+.0f} s against "
             f"the direct time ({names[base]}: {delay_b:+.0f} s): a share of clean flights also "
             "rises when flights are shorter."

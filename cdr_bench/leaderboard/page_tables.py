@@ -135,6 +135,16 @@ def html_table(
 HIGHER, LOWER = "▲", "▼"
 
 
+def signed(x: float) -> str:
+    """``x`` with its sign and one decimal; a non-zero ``x`` that one decimal would show as 0.0
+    keeps its sign and one significant digit (``-0.04``), so that an interval that excludes 0
+    never reads as reaching it; exactly 0 is ``+0.0``."""
+    r = round(x, 1) + 0.0  # + 0.0: no "-0.0"
+    if r == 0.0 and x != 0.0:
+        return f"{x:+.1g}"
+    return f"{r:+.1f}"
+
+
 def fmt_diff(kind: str, d: dict[str, Any] | None) -> str:
     """A paired difference ``{diff, ci95, significant}``: points (pp) for rates, with its 95 %
     interval; ``▲``/``▼`` when significant."""
@@ -143,7 +153,7 @@ def fmt_diff(kind: str, d: dict[str, Any] | None) -> str:
     scale, unit = (100.0, " pp") if kind == "rate" else (1.0, "")
 
     def f(x: float) -> str:
-        return f"{round(scale * x, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
+        return signed(scale * x)
 
     lo, hi = d["ci95"]
     ci = "" if lo is None or hi is None else f" [{f(lo)}, {f(hi)}]"

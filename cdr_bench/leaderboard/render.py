@@ -37,6 +37,7 @@ from cdr_bench.leaderboard.page_tables import (
     seeds_table,
     sensitivity_table,
     side_by_side_tables,
+    signed,
     tactical_table,
 )
 from cdr_bench.leaderboard.published import Published
@@ -181,12 +182,9 @@ def _pct(m: dict[str, Any]) -> str:
 
 
 def _pp(d: dict[str, Any], sign: float = 1.0) -> str:
-    def f(x: float) -> str:
-        return f"{round(100 * x, 1) + 0.0:+.1f}"  # + 0.0: no "-0.0"
-
     lo, hi = d["ci95"]
     a, b = sorted((sign * lo, sign * hi))
-    return f"{f(sign * d['diff'])} points [{f(a)}, {f(b)}]"
+    return f"{signed(100 * sign * d['diff'])} points [{signed(100 * a)}, {signed(100 * b)}]"
 
 
 def _vs_baseline(data: dict[str, Any], vs: list[dict[str, Any]], what: str) -> str:
@@ -276,7 +274,10 @@ def conclusion(data: dict[str, Any]) -> list[str]:
                 f" Its lead over the runner-up, {names[ru]} ({_pct(rows[ru]['headline'])}), "
                 f"is significant: {_pp(gap)}"
             )
-        first += " (95 % paired bootstrap on the same episodes, averaged over seeds)."
+        first += (
+            " (95 % paired bootstrap on the same episodes, averaged over seeds; one comparison, "
+            "not corrected for the tests below)."
+        )
     out.append(first)
     for group, what in (
         ("learned", "learned agent{s} that learn{v} from scratch"),

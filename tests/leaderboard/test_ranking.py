@@ -260,3 +260,19 @@ def test_plots(data: dict[str, Any]) -> None:
     a = render_plots(data)
     assert list(a)[:1] == ["pareto.png"] and "tactical_success_rate.png" in a
     assert all(png.startswith(b"\x89PNG") for png in a.values())
+
+
+def test_an_interval_that_excludes_zero_never_reads_as_reaching_it() -> None:
+    """A bound that one decimal would print as 0.0 keeps its sign and a significant digit (the
+    ranking's MVP row was shown as -0.8 pp [-1.6, +0.0] ▼ for an upper bound of -0.04 pp)."""
+    from cdr_bench.leaderboard.page_tables import fmt_diff, signed
+
+    d = {"diff": -0.0078, "ci95": [-0.0164, -0.0004], "significant": True}
+    assert fmt_diff("rate", d) == "-0.8 pp [-1.6, -0.04] ▼"
+    assert [signed(x) for x in (0.0, -0.0, 0.04, -0.049, 1.26)] == [
+        "+0.0",
+        "+0.0",
+        "+0.04",
+        "-0.05",
+        "+1.3",
+    ]
