@@ -6,9 +6,10 @@ The rule of agents/mvp_improve deviates from ``mvp`` only where some action's sa
 ``mvp``'s by more than the margin (``slack`` in the checkpoint's config). For each margin this
 writes a copy of the checkpoint with that margin (``<checkpoint folder>/slack-<x>/checkpoint.pt``;
 its bytes, so its identity, differ) and scores it and ``mvp`` on the same ``--episodes`` of
-``high`` drawn from ``--seed`` (default 500000: not the leaderboard's episodes, which start at
-seed 0), then prints clean success, LoS and NMAC of each beside ``mvp``'s. Pick the margin here,
-then score the chosen copy on the leaderboard's episodes.
+``high`` drawn from ``--seed`` (default 500000: neither the leaderboard's test episodes, base
+seed 20261127, nor the validation sets, base seeds 1 and 0), then prints clean success, LoS
+and NMAC of each beside ``mvp``'s. Pick the margin here, then score the chosen copy on the
+leaderboard's episodes.
 
     python sweeps/mvp_improve_margin.py --set 0.25 agents/mvp_improve/checkpoint.pt ...
 
