@@ -61,6 +61,7 @@ cannot be resumed (its key is not there): run again without ``--resume``.
 
 from __future__ import annotations
 
+import copy
 import gzip
 import hashlib
 import hmac
@@ -536,8 +537,32 @@ def read_result(
             f"schema {SCHEMA_VERSION} never holds (they are computed from the per-episode log "
             "when read): an edited file; re-run the evaluation"
         )
-    eps = _parse_episodes(ep, log, digest)
-    return add_metrics(data, eps, roles) if metrics else data
+    if not metrics:
+        return data
+    from cdr_bench.evaluate.metrics import registry_generation
+
+    key = (digest, roles, registry_generation(), tuple(str(s.get("id")) for s in data["scenarios"]))
+    computed = _METRICS_CACHE.get(key)
+    if computed is None:
+        add_metrics(data, _parse_episodes(ep, log, digest), roles)
+        computed = [
+            {k: s[k] for k in ("metrics", "system_metrics") if k in s} for s in data["scenarios"]
+        ]
+        if len(_METRICS_CACHE) >= 1024:
+            _METRICS_CACHE.pop(next(iter(_METRICS_CACHE)))
+        _METRICS_CACHE[key] = copy.deepcopy(computed)
+        return data
+    for s, c in zip(data["scenarios"], computed, strict=True):
+        s.pop("system_metrics", None)  # as add_metrics: only where computed
+        s.update(copy.deepcopy(c))
+    return data
+
+
+_METRICS_CACHE: dict[tuple[str, bool, int, tuple[str, ...]], list[dict[str, Any]]] = {}
+"""Metrics computed by :func:`read_result`, by the SHA-256 of the per-episode log they come from
+(the scenarios they are grouped by, the metric registry's generation): a function of the
+log's text and the metric definitions, so a process that reads
+the same result twice (the leaderboard's pages, then its docs blocks) computes them once."""
 
 
 def read_episodes(result_path: str | os.PathLike[str], result: dict[str, Any]) -> list[dict]:

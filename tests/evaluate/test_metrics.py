@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from cdr_bench.evaluate.metrics import (
@@ -141,3 +142,29 @@ def test_bootstrap_is_deterministic_and_sane():
     assert a[0] < mean < a[1] and a[1] - a[0] < 1.0
     assert bootstrap_mean_interval([3.0]) == (3.0, 3.0)
     assert all(math.isnan(v) for v in bootstrap_mean_interval([]))
+
+
+def test_resample_counts_are_the_resampled_indices() -> None:
+    # counts @ x is the sum over x[indices] of every resample: exactly for integer facts, to the
+    # last bits for others; the intervals are those of the gathered resamples
+    from cdr_bench.evaluate.metrics import (
+        bootstrap_mean_interval,
+        ratio_interval,
+        resample_counts,
+        resample_indices,
+    )
+
+    rng = np.random.default_rng(3)
+    for n in (2, 17, 537):
+        idx, counts = resample_indices(n), resample_counts(n)
+        assert counts.shape == idx.shape and not counts.flags.writeable
+        assert (counts.sum(axis=1) == n).all()
+        k = rng.integers(0, 2, n).astype(float)
+        assert np.array_equal(counts @ k, k[idx].sum(axis=1))
+        x = rng.normal(50.0, 20.0, n)
+        np.testing.assert_allclose(counts @ x, x[idx].sum(axis=1), rtol=1e-12)
+        lo, hi = np.percentile(x[idx].mean(axis=1), [2.5, 97.5])
+        np.testing.assert_allclose(bootstrap_mean_interval(x), (lo, hi), rtol=1e-12)
+        nd = np.stack([k, np.ones(n)], axis=1)
+        sums = nd[idx].sum(axis=1)
+        assert ratio_interval(nd) == tuple(np.percentile(sums[:, 0] / sums[:, 1], [2.5, 97.5]))
