@@ -30,7 +30,7 @@ Table 2 agents and the Table 3 variants. Rules, decided before looking at the nu
   curve point from which the running mean of three points stays at or above the target to the
   end (the run's length if it never does). Reduction = 1 - mean(complete) / mean(W/O DPSC), with
   a bootstrap interval over seeds; held when the interval is above 0. (Fixed before any
-  reference-budget W/O DPSC curve existed: sweeps/CAMPAIGN.md.)
+  reference-budget W/O DPSC curve existed: the git history of sweeps/CAMPAIGN.md.)
 * *Diffusion-AC is more multimodal than PPO*: held when its mean number of successful manoeuvre
   families per first decision (``cdr-bench multimodal``) is higher on every tactical family.
 * Fig. 7: one claim per factor, the rule of :mod:`cdr_bench.leaderboard.sensitivity`.
