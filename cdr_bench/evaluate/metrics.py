@@ -90,7 +90,7 @@ def bootstrap_mean_interval(
         return (math.nan, math.nan)
     if x.size == 1:
         return (float(x[0]), float(x[0]))
-    means = resample_counts(x.size, resamples, seed) @ x / x.size
+    means = _resampled_sums(x, resample_indices(x.size, resamples, seed)) / x.size
     lo, hi = np.percentile(means, [2.5, 97.5])
     return (float(lo), float(hi))
 
@@ -108,7 +108,9 @@ def ratio_interval(
     if x.shape[0] == 1:
         v = x[0, 0] / x[0, 1]
         return (v, v)
-    sums = resample_counts(x.shape[0], resamples, seed) @ x
+    sums = _resampled_row_sums(
+        np.ascontiguousarray(x), resample_indices(x.shape[0], resamples, seed)
+    )
     ok = sums[:, 1] > 0
     ratios = sums[ok, 0] / sums[ok, 1]
     lo, hi = np.percentile(ratios, [2.5, 97.5])
@@ -128,26 +130,79 @@ def resample_indices(
     return idx
 
 
-@functools.lru_cache(maxsize=8)
-def resample_counts(
-    n: int, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
-) -> NDArray[np.float64]:
-    """How many times each position is drawn in each resample of :func:`resample_indices`,
-    ``(resamples, n)`` (read-only): a resample's sum over a sample ``x`` is ``counts @ x``, the
-    same resamples as gathering ``x[indices]`` and several times faster. Sums of integers
-    (counts of events) are exactly the gathered ones; sums of other values may differ from them
-    in the last bit only, far below the 6 decimals an interval is recorded with."""
-    out = _counts(resample_indices.__wrapped__(n, resamples, seed), n)
-    out.flags.writeable = False
+@numba.njit(cache=True)
+def _block_sum(x: NDArray[np.float64], row: NDArray[np.int64], lo: int, n: int) -> float:
+    """``x[row[lo:lo + n]].sum()`` for ``n <= 128`` in numpy's order (8 interleaved sums)."""
+    if n < 8:
+        res = -0.0
+        for i in range(lo, lo + n):
+            res += x[row[i]]
+        return res
+    r0, r1, r2, r3 = x[row[lo]], x[row[lo + 1]], x[row[lo + 2]], x[row[lo + 3]]
+    r4, r5, r6, r7 = x[row[lo + 4]], x[row[lo + 5]], x[row[lo + 6]], x[row[lo + 7]]
+    i, m = 8, n - n % 8
+    while i < m:
+        r0 += x[row[lo + i]]
+        r1 += x[row[lo + i + 1]]
+        r2 += x[row[lo + i + 2]]
+        r3 += x[row[lo + i + 3]]
+        r4 += x[row[lo + i + 4]]
+        r5 += x[row[lo + i + 5]]
+        r6 += x[row[lo + i + 6]]
+        r7 += x[row[lo + i + 7]]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += x[row[lo + i]]
+        i += 1
+    return res
+
+
+@numba.njit(cache=True)
+def _pairwise_sum(x: NDArray[np.float64], row: NDArray[np.int64]) -> float:
+    """``x[row].sum()`` added in numpy's pairwise order, the same bits as numpy's: blocks of up
+    to 128 (:func:`_block_sum`), a longer range halved at a multiple of 8 and its halves'
+    sums added (numpy recurses; here a stack of pending ranges and of finished sums)."""
+    todo = np.empty((128, 3), dtype=np.int64)  # lo, n, 1 = add the last two sums
+    sums = np.empty(128)
+    t, v = 1, 0
+    todo[0, 0], todo[0, 1], todo[0, 2] = 0, row.size, 0
+    while t > 0:
+        t -= 1
+        lo, n, join = todo[t, 0], todo[t, 1], todo[t, 2]
+        if join:
+            v -= 1
+            sums[v - 1] = sums[v - 1] + sums[v]
+        elif n <= 128:
+            sums[v] = _block_sum(x, row, lo, n)
+            v += 1
+        else:
+            n2 = n // 2
+            n2 -= n2 % 8
+            todo[t, 0], todo[t, 1], todo[t, 2] = 0, 0, 1
+            todo[t + 1, 0], todo[t + 1, 1], todo[t + 1, 2] = lo + n2, n - n2, 0
+            todo[t + 2, 0], todo[t + 2, 1], todo[t + 2, 2] = lo, n2, 0
+            t += 3
+    return sums[0]
+
+
+@numba.njit(cache=True)
+def _resampled_sums(x: NDArray[np.float64], idx: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``x[idx].sum(axis=1)`` bit for bit, without the ``(resamples, n)`` gathered copy."""
+    out = np.empty(idx.shape[0])
+    for r in range(idx.shape[0]):
+        out[r] = _pairwise_sum(x, idx[r])
     return out
 
 
 @numba.njit(cache=True)
-def _counts(idx: NDArray[np.int64], n: int) -> NDArray[np.float64]:  # pragma: no cover
-    out = np.zeros((idx.shape[0], n))
+def _resampled_row_sums(x: NDArray[np.float64], idx: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``x[idx].sum(axis=1)`` of a 2-D ``x`` bit for bit (numpy adds the rows in order)."""
+    out = np.zeros((idx.shape[0], x.shape[1]))
     for r in range(idx.shape[0]):
         for c in range(idx.shape[1]):
-            out[r, idx[r, c]] += 1.0
+            for j in range(x.shape[1]):
+                out[r, j] += x[idx[r, c], j]
     return out
 
 
