@@ -36,18 +36,13 @@ def test_every_marked_block_has_a_renderer(rel: str) -> None:
 
 
 def test_doc_blocks_are_what_the_committed_files_produce() -> None:
-    rendered = tables.rendered_docs(ROOT / "leaderboard")
-    assert set(rendered) == set(tables.DOC_BLOCKS)
-    stale = [rel for rel, (old, new) in rendered.items() if old != new]
-    assert not stale, (
-        f"stale results blocks in {', '.join(stale)}: run `cdr-bench leaderboard render-docs`\n"
-        + "\n".join(tables.render_docs(ROOT / "leaderboard", check=True))
+    # one render of the repository's blocks (the costly part: every result read), through the
+    # CLI a contributor runs; it names every stale block and exits non-zero
+    assert set(tables.DOC_BLOCKS) >= {"README.md"}
+    r = cdr("leaderboard", "render-docs", "--check", cwd=ROOT, timeout=300)
+    assert r.returncode == 0, (
+        f"stale results blocks: run `cdr-bench leaderboard render-docs`\n{r.stderr}"
     )
-
-
-def test_render_docs_check_cli_passes_on_the_repository() -> None:
-    r = cdr("leaderboard", "render-docs", "--check", cwd=ROOT, timeout=120)
-    assert r.returncode == 0, r.stderr
     assert "match the result files" in r.stderr
 
 
