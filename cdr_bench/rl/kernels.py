@@ -338,6 +338,24 @@ def _groups(actions: NDArray[np.int64], n_act: int) -> tuple[NDArray[np.int64], 
     return order, start
 
 
+@njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
+def _centred_row(
+    mu: NDArray[np.float32],
+    sigma: NDArray[np.float32],
+    eps_in: NDArray[np.float32],
+    eps_out: NDArray[np.float32],
+    w_mean: NDArray[np.float32],
+    o: int,
+    j: int,
+    row: NDArray[np.float32],
+) -> None:
+    """``row`` = row ``o`` of the noisy weights minus the mean row ``j`` over actions."""
+    eo = eps_out[o]
+    m, sg, wm = mu[o], sigma[o], w_mean[j]
+    for i in range(row.shape[0]):
+        row[i] = m[i] + sg[i] * (eo * eps_in[i]) - wm[i]
+
+
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def noisy_head_forward(
     h: NDArray[np.float32],
@@ -379,11 +397,8 @@ def noisy_head_forward(
             continue
         for j in range(k):
             o = a * k + j
-            eo = eps_out[o]
-            m, sg, wm = mu[o], sigma[o], w_mean[j]
-            for i in range(width):
-                row[i] = m[i] + sg[i] * (eo * eps_in[i]) - wm[i]
-            bias = mu_b[o] + sigma_b[o] * eo - b_mean[j]
+            _centred_row(mu, sigma, eps_in, eps_out, w_mean, o, j, row)
+            bias = mu_b[o] + sigma_b[o] * eps_out[o] - b_mean[j]
             for p in range(start[a], start[a + 1]):
                 n = order[p]
                 hn = h[n]
@@ -438,9 +453,7 @@ def noisy_head_backward(
                 row[i] = -inv * gm[i]
             gb = -inv * gb_mean[j]
             if start[a] < start[a + 1]:
-                m, sg, wm = mu[o], sigma[o], w_mean[j]
-                for i in range(width):
-                    wrow[i] = m[i] + sg[i] * (eo * eps_in[i]) - wm[i]
+                _centred_row(mu, sigma, eps_in, eps_out, w_mean, o, j, wrow)
                 for p in range(start[a], start[a + 1]):
                     n = order[p]
                     g = grad_out[n, j]
