@@ -10,6 +10,9 @@ agent is built once, unconfined, from the repository's committed files (what the
 also runs in-process), and asked for one batch of decisions: its kernels land in the package's
 cache, and every confined re-run afterwards loads them. It changes no result: a cache entry is
 the compiled form of the package's own source, checked against that source by numba.
+
+CI runs it twice: as is, and with ``NUMBA_CPU_NAME=generic`` (numba keeps the entries of each
+CPU target apart), for the tests that run agents under another CPU's settings.
 """
 
 from __future__ import annotations
