@@ -9,9 +9,11 @@
 # one its submission names (seed 1: the entry's checkpoint, k > 1: agents/<agent>/seeds/<k>/).
 # Episodes: the leaderboard's test set (base seed 20261127, docs/model.md §10.1.2), the first
 # EPISODES of each family (100), SAMPLES first actions each (50), with the family search.
-# Outputs, beside the entries' results (the naming of <entry>.seed-<k>.json):
-#   leaderboard/results/<entry>.seed-<k>.multimodal-tactical_<family>.json|.png
-# Runs one scorer process at a time; a finished file (its JSON) is kept unless FORCE=1.
+# Outputs, beside the entries' results (the naming of <entry>.seed-<k>.json): the JSON of
+# `cdr-bench multimodal`, compact and xz-compressed (its heat map is not kept),
+#   leaderboard/results/<entry>.seed-<k>.multimodal-tactical_<family>.json.xz
+# which the leaderboard's multimodality claim reads (cdr_bench/leaderboard/claims.py).
+# Runs one process at a time; a finished file is kept unless FORCE=1.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 py=${PYTHON:-python}
@@ -31,13 +33,24 @@ for entry in "${entries[@]}"; do
         if [ "$k" = 1 ]; then cp=$ck/checkpoint.pt; else cp=$ck/seeds/$k/checkpoint.pt; fi
         for sc in head-on crossing overtaking; do
             out=leaderboard/results/$entry.seed-$k.multimodal-tactical_$sc.json
-            if [ -f "$out" ] && [ "${FORCE:-0}" != 1 ]; then
-                echo "$out: done"
+            if [ -f "$out.xz" ] && [ "${FORCE:-0}" != 1 ]; then
+                echo "$out.xz: done"
                 continue
             fi
             CDR_BENCH_CHECKPOINT=$cp "$py" -m cdr_bench multimodal $ag --search \
                 --seed 20261127 --episodes "$episodes" --samples "$samples" \
                 --scenario tactical/$sc --out "$out"
+            "$py" - "$out" <<'PY'
+import json, lzma, sys
+from pathlib import Path
+
+out = Path(sys.argv[1])
+text = json.dumps(json.loads(out.read_text()), separators=(",", ":"), sort_keys=True)
+Path(f"{out}.xz.tmp").write_bytes(lzma.compress(text.encode(), preset=9 | lzma.PRESET_EXTREME))
+Path(f"{out}.xz.tmp").replace(f"{out}.xz")
+out.unlink()
+out.with_suffix(".png").unlink(missing_ok=True)
+PY
         done
     done
 done

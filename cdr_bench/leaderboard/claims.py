@@ -31,8 +31,17 @@ Table 2 agents and the Table 3 variants. Rules, decided before looking at the nu
   end (the run's length if it never does). Reduction = 1 - mean(complete) / mean(W/O DPSC), with
   a bootstrap interval over seeds; held when the interval is above 0. (Fixed before any
   reference-budget W/O DPSC curve existed: the git history of sweeps/CAMPAIGN.md.)
-* *Diffusion-AC is more multimodal than PPO*: held when its mean number of successful manoeuvre
-  families per first decision (``cdr-bench multimodal``) is higher on every tactical family.
+* *Diffusion-AC is more multimodal than PPO*: judged against PPO's policy *sampled* from its
+  categorical distribution (entry ``ppo-sampled``; PPO's argmax reaches at most one family per
+  episode by construction), with at least three training seeds of each on the same episodes of
+  every tactical family (``cdr-bench multimodal`` of each seed, ``sweeps/multimodal_seeds.sh``).
+  Per family, the paired difference of the mean number of successful manoeuvre families per
+  first decision (averaged over seeds, then episodes) with its two-level bootstrap interval
+  (:func:`cdr_bench.evaluate.aggregate.paired_seed_difference`, episode indices of
+  :func:`cdr_bench.evaluate.compare.scenario_indices`) and its bootstrap p-value; held when
+  Diffusion-AC is higher on every family after a Holm correction over the families. The
+  per-sample success of the same first decisions is shown beside it (several modes that fail
+  are not an advantage).
 * Fig. 7: one claim per factor, the rule of :mod:`cdr_bench.leaderboard.sensitivity`.
 * Latency: the paper's order (Diffusion-AC the slowest) against our medians per decision, which
   are measured on this CPU, not on the paper's GPU.
@@ -45,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.evaluate import aggregate
-from cdr_bench.evaluate.compare import holm, measurable
+from cdr_bench.evaluate.compare import holm, measurable, scenario_indices
 from cdr_bench.evaluate.metrics import (
     BOOTSTRAP_RESAMPLES,
     BOOTSTRAP_SEED,
@@ -75,6 +84,9 @@ CONVERGENCE_FRACTION = 0.9
 CONVERGENCE_WINDOW = 3
 """Points of the running mean (and of a curve's final level)."""
 CONVERGENCE_MIN_SEEDS = 3
+MULTIMODAL_COMPARATOR = "ppo-sampled"
+"""The entry the multimodality claim is judged against: PPO's policy sampled, not its argmax."""
+MULTIMODAL_MIN_SEEDS = 3
 
 Curve = list[list[float]]
 """``[[step, value], ...]`` of one training run."""
@@ -197,6 +209,81 @@ def _nmac_reduction(a: Any, b: Any) -> tuple[float | None, list[float] | None]:
     return 1.0 - int(fa.sum()) / int(fb.sum()), [float(lo), float(hi)]
 
 
+def multimodality_over_seeds(
+    a: dict[str, dict[int, dict[str, Any]]], b: dict[str, dict[int, dict[str, Any]]]
+) -> tuple[str, str]:
+    """The multimodality claim's measurement and verdict: ``a`` (Diffusion-AC) against ``b``
+    (the comparator), each scenario -> seed -> ``cdr-bench multimodal``'s JSON (the rule in the
+    module docstring)."""
+    fams = sorted(set(a) & set(b))
+    if not fams:
+        return f"no multimodality run of the seeds of both (need {MULTIMODAL_COMPARATOR})", (
+            NOT_MEASURED
+        )
+    rows = []
+    for sc in fams:
+        ra, rb = [a[sc][k] for k in sorted(a[sc])], [b[sc][k] for k in sorted(b[sc])]
+        seeds = {tuple(ep["seed"] for ep in d.get("per_episode", [])) for d in ra + rb}
+        samples = {int(d["samples"]) for d in ra + rb}
+        if len(seeds) != 1 or len(samples) != 1 or not next(iter(seeds)):
+            return f"{sc}: the runs are not on the same episodes and samples", NOT_MEASURED
+        n, m = len(next(iter(seeds))), samples.pop()
+
+        def per_episode(runs: list[dict[str, Any]], what: str) -> list[list[Any]]:
+            return [
+                [
+                    np.asarray(
+                        [
+                            len(ep["families"]) if what == "families" else sum(ep["success"])
+                            for ep in d["per_episode"]
+                        ],
+                        np.int64,
+                    )
+                ]
+                for d in runs
+            ]
+
+        idx = scenario_indices(sc, n)
+        fam = aggregate.paired_seed_difference(
+            per_episode(rb, "families"), per_episode(ra, "families"), idx
+        )
+        suc = aggregate.paired_seed_difference(
+            per_episode(rb, "success"), per_episode(ra, "success"), idx
+        )
+        mean = {
+            side: (
+                float(np.mean([len(ep["families"]) for d in runs for ep in d["per_episode"]])),
+                float(np.mean([sum(ep["success"]) for d in runs for ep in d["per_episode"]])) / m,
+            )
+            for side, runs in (("a", ra), ("b", rb))
+        }
+        rows.append((sc, len(ra), len(rb), n, m, fam, suc, mean))
+    adjusted = holm([r[5]["p"] for r in rows])
+    # a bootstrap p-value of 0 means below 2 / resamples (then times the Holm factor)
+    floor = len(rows) * 2 / BOOTSTRAP_RESAMPLES
+    cells, ok = [], True
+    for (sc, sa, sb, n, m, fam, suc, mean), p in zip(rows, adjusted, strict=True):
+        lo, hi = fam["ci95"]
+        slo, shi = suc["ci95"]
+        cells.append(
+            f"{sc} ({sa} vs {sb} seeds, {n} episodes, {m} samples each): "
+            f"{mean['a'][0]:.2f} vs {mean['b'][0]:.2f} families, {fam['diff']:+.2f} "
+            f"[{lo:+.2f}, {hi:+.2f}], Holm p {f'< {floor:.2g}' if p == 0 else f'= {p:.2g}'}; "
+            f"per-sample success "
+            f"{_pct(mean['a'][1])} vs {_pct(mean['b'][1])} "
+            f"({100 * suc['diff'] / m:+.1f} pp [{100 * slo / m:+.1f}, {100 * shi / m:+.1f}])"
+        )
+        ok = ok and p < ALPHA and fam["diff"] > 0
+    enough = all(r[1] >= MULTIMODAL_MIN_SEEDS and r[2] >= MULTIMODAL_MIN_SEEDS for r in rows)
+    measured = (
+        f"successful manoeuvre families per first decision, Diffusion-AC vs PPO (sampled), "
+        f"paired, mean over seeds: {'; '.join(cells)}"
+    )
+    if not enough:
+        return measured + f" (fewer than {MULTIMODAL_MIN_SEEDS} seeds a side)", NOT_MEASURED
+    return measured, HELD if ok else NOT_HELD
+
+
 def build_claims(
     by_row: dict[str, Any],
     paired: Any,
@@ -206,6 +293,7 @@ def build_claims(
     sensitivity: dict[str, Any] | None = None,
     training: dict[str, list[tuple[Curve, int]]] | None = None,
     budgets: dict[str, Any] | None = None,
+    multimodal_seeds: dict[str, dict[str, dict[int, dict[str, Any]]]] | None = None,
 ) -> list[dict[str, Any]]:
     """``by_row``: published row -> Entry; ``paired.metric(a, b, sid, metric)``: the paired
     difference b - a; ``multimodal``: (entry, scenario) -> mean successful families;
@@ -214,8 +302,11 @@ def build_claims(
     Fig. 7 study (:mod:`cdr_bench.leaderboard.sensitivity`, whose rule judges it);
     ``training``: entry -> ``(fixed-set curve, transitions)`` of each seed that logged one;
     ``budgets``: entry -> its training transitions (an int, ``[min, max]`` when its seeds
-    differ, ``None`` when unknown), which an ablation claim needs equal on both sides."""
+    differ, ``None`` when unknown), which an ablation claim needs equal on both sides;
+    ``multimodal_seeds``: entry -> scenario -> training seed -> ``cdr-bench multimodal``'s
+    JSON (with ``per_episode``)."""
     training = training or {}
+    multimodal_seeds = multimodal_seeds or {}
     budgets = budgets or {}
     out: list[dict[str, Any]] = []
 
@@ -361,25 +452,32 @@ def build_claims(
             "paired bootstrap of 1 - NMAC(Diffusion-AC) / NMAC(next best); "
             "held if it is above 0 and covers 59 %")  # fmt: skip
 
-    # 7: multimodality against PPO
-    ppo = by_row.get("PPO")
-    fams = sorted({sc for (_, sc) in multimodal})
-    if dac is not None and ppo is not None and fams:
-        cells = []
-        ok = True
-        for sc in fams:
-            a, b = multimodal.get((dac.name, sc)), multimodal.get((ppo.name, sc))
-            if a is None or b is None:
-                ok = False
-                continue
-            cells.append(f"{sc}: {a:.2f} vs {b:.2f}")
-            ok = ok and a > b
-        add("multimodality",
-            "Diffusion-AC keeps several manoeuvres per conflict; PPO collapses to one mode",
-            "§5.2.2", "qualitative (no number published)",
-            "successful manoeuvre families per first decision, Diffusion-AC vs PPO (argmax): "
-            + "; ".join(cells), HELD if ok and cells else NOT_HELD,
-            "cdr-bench multimodal on the tactical families: higher on every family")  # fmt: skip
+    # 7: multimodality against PPO (sampled), over seeds
+    claim7 = "Diffusion-AC keeps several manoeuvres per conflict; PPO collapses to one mode"
+    test7 = (
+        f"per tactical family, the paired difference of successful manoeuvre families per "
+        f"first decision (mean over seeds, then episodes; two-level bootstrap); held if "
+        f"Diffusion-AC is higher on every family, Holm-corrected at 5 % over the families; "
+        f">= {MULTIMODAL_MIN_SEEDS} seeds a side"
+    )
+    argmax = by_row.get("PPO")
+    argmax_cells = (
+        "; ".join(
+            f"{sc}: {multimodal[(argmax.name, sc)]:.2f}"
+            for sc in sorted({sc for (_, sc) in multimodal})
+            if (argmax.name, sc) in multimodal
+        )
+        if argmax is not None
+        else ""
+    )
+    if dac is not None:
+        measured, verdict = multimodality_over_seeds(
+            multimodal_seeds.get(dac.name, {}), multimodal_seeds.get(MULTIMODAL_COMPARATOR, {})
+        )
+        if argmax_cells:
+            measured += f". PPO's argmax (at most 1 by construction, seed 1): {argmax_cells}"
+        add("multimodality", claim7, "§5.2.2", "qualitative (no number published)", measured,
+            verdict, test7)  # fmt: skip
 
     # 8-11: Table 3 ablations
     comp = by_row.get(COMPLETE)

@@ -42,6 +42,7 @@ step 7``), never as a rate with an interval.
 from __future__ import annotations
 
 import json
+import lzma
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,7 +58,12 @@ from cdr_bench.leaderboard.claims import build_claims
 from cdr_bench.leaderboard.page_tables import DENSITIES, MAIN_COLUMNS
 from cdr_bench.leaderboard.published import METRIC_OF_COLUMN, Published
 from cdr_bench.leaderboard.submission import GROUPS, Submission
-from cdr_bench.leaderboard.tables import multimodal_path, replays_path, result_path
+from cdr_bench.leaderboard.tables import (
+    multimodal_path,
+    multimodal_seed_path,
+    replays_path,
+    result_path,
+)
 
 DEFAULT_REFERENCE = "diffusion-ac"
 DATA_VERSION = 6
@@ -96,6 +102,9 @@ class Entry:
     path: Path
     result: dict[str, Any]
     multimodal: dict[str, dict[str, Any]] = field(default_factory=dict)
+    multimodal_seeds: dict[str, dict[int, dict[str, Any]]] = field(default_factory=dict)
+    """Per multimodality scenario, ``cdr-bench multimodal`` of each training seed that has one
+    (:func:`cdr_bench.leaderboard.tables.multimodal_seed_path`), by seed."""
     episodes: list[dict[str, Any]] = field(default_factory=list)
     """The per-episode records (all scenarios, in file order)."""
     replays: dict[str, Any] | None = None
@@ -149,9 +158,13 @@ def check_result(sub: Submission, path: Path) -> tuple[dict[str, Any], list[dict
 
 
 def load_multimodal(path: Path) -> dict[str, Any]:
+    """The JSON of ``cdr-bench multimodal`` (xz-compressed when the name ends in ``.xz``)."""
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as e:
+        raw = path.read_bytes()
+        if path.suffix == ".xz":
+            raw = lzma.decompress(raw)
+        d = json.loads(raw.decode("utf-8"))
+    except (OSError, lzma.LZMAError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise UserError(f"{path}: not a multimodality file ({e})") from None
     keys = ("scenario", "samples", "seed", "all", "success", "success_rate", "modes")
     if not isinstance(d, dict) or any(k not in d for k in keys):
@@ -197,6 +210,13 @@ def load_entries(subs: list[Submission], results_dir: Path) -> list[Entry]:
         ):
             run = _checked_entry(view, results_dir, f"seed {seed.seed} of {sub.name}", sub.name)
             e.runs.append((seed.seed, run))
+        for sc in sub.multimodality:
+            for k, _ in e.runs:
+                mp = multimodal_seed_path(results_dir, sub.name, 1 if k is None else k, sc)
+                if mp.exists():
+                    e.multimodal_seeds.setdefault(sc, {})[1 if k is None else k] = load_multimodal(
+                        mp
+                    )
         entries.append(e)
     known = {result_path(results_dir, v.name).name for s in subs for v in (s, *s.seed_views())}
     stale = sorted(
@@ -1086,6 +1106,7 @@ def build_data(
             sensitivity,
             {e.name: _fixed_runs(e, info[e.name]) for e in entries},
             {e.name: (info[e.name][0] or {}).get("transitions") for e in entries},
+            {e.name: e.multimodal_seeds for e in entries if e.multimodal_seeds},
         ),
         "sensitivity": sensitivity,
         "tables": tables,

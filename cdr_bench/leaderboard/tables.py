@@ -63,6 +63,12 @@ def multimodal_path(results_dir: Path, name: str, scenario: str) -> Path:
     return results_dir / f"{name}.multimodal-{scenario.replace('/', '_')}.json"
 
 
+def multimodal_seed_path(results_dir: Path, name: str, seed: int, scenario: str) -> Path:
+    """``cdr-bench multimodal`` of training seed ``seed`` of entry ``name`` (its JSON, compact and
+    xz-compressed; written by ``sweeps/multimodal_seeds.sh``, read for the multimodality claim)."""
+    return results_dir / f"{name}.seed-{seed}.multimodal-{scenario.replace('/', '_')}.json.xz"
+
+
 def replays_path(results_dir: Path, name: str) -> Path:
     """Recorded trajectories of the entry's ``replays`` scenarios (written by the scorer)."""
     return results_dir / f"{name}.replays.json"
