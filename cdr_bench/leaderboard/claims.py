@@ -566,7 +566,8 @@ def build_claims(
             f"{steps}; reduction {100 * conv['reduction']:+.0f} % [{100 * conv['ci95'][0]:+.0f}, "
             f"{100 * conv['ci95'][1]:+.0f}]",
             HELD if conv["ci95"][0] > 0 else NOT_HELD, test)  # fmt: skip
-    out.extend(sensitivity_claims(sensitivity))
+    ref_budget = budgets.get(dac.name) if dac is not None else None
+    out.extend(sensitivity_claims(sensitivity, ref_budget if isinstance(ref_budget, int) else None))
 
     # 14: latency order
     if dac is not None and base and dac.name in latency:

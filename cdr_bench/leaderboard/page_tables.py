@@ -369,6 +369,7 @@ def sensitivity_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
         "seeds",
         "per seed",
         "paper (published)",
+        "clean success: mean ± sd (judged)",
     ]
     rows: Rows = []
     for fac in (data.get("sensitivity") or {}).get("factors", []):
@@ -388,6 +389,10 @@ def sensitivity_table(data: dict[str, Any]) -> tuple[list[str], Rows]:
                         if paper is None
                         else (f"{paper:g} %" if m == "success_rate" else f"{paper:g}"),
                         paper,
+                    ),
+                    Cell(
+                        study_value("success_rate", p.get("clean_mean"), p.get("clean_sd")),
+                        p.get("clean_mean"),
                     ),
                 ]
             )

@@ -13,7 +13,7 @@ from cdr_bench.errors import UserError
 from cdr_bench.leaderboard import sensitivity as sens
 
 ROOT = Path(__file__).resolve().parents[2]
-FIXED = {"T": 10, "polyak": 0.005, "critic-width": 128}
+FIXED = {"T": 10, "polyak": 0.005, "critic-width": 128, "total-steps": 100000}
 
 
 def _trial(d: Path, key: str, factor: str, label: str, seed: int, success: float) -> None:
@@ -34,7 +34,8 @@ def _trial(d: Path, key: str, factor: str, label: str, seed: int, success: float
         )
     )
     metrics = {
-        "success_rate": {"value": success},
+        "success_rate": {"value": min(1.0, success + 0.1)},  # the paper's metric, not judged
+        "clean_success_rate": {"value": success},
         "nmac_rate": {"value": 0.0},
         "goal_reward": {"value": success},
         "safety_reward": {"value": -1.0},
@@ -44,7 +45,7 @@ def _trial(d: Path, key: str, factor: str, label: str, seed: int, success: float
 
 
 def _grid(tmp: Path, t_values: dict[str, list[float]], n: int = 3) -> Path:
-    """Trials of the T factor (``label -> success per seed``; "10" is the centre trial)."""
+    """Trials of the T factor (``label -> clean success per seed``; "10" is the centre trial)."""
     d = tmp / "trials"
     for label, per_seed in t_values.items():
         for seed, v in enumerate(per_seed[:n], start=1):
@@ -75,7 +76,19 @@ def test_held_when_best_in_range_and_every_seed_above_those_outside(tmp_path: Pa
     row = _claim(tmp_path, {**BASE, "10": [0.6, 0.62, 0.61]})
     assert row["verdict"] == "held", row
     assert "best at 20" in row["measured"]
-    assert "80.0 % ± 0.8 (3)" in row["measured"]
+    assert "20: 80.0 % ± 0.8 (3; success 90.0 %)" in row["measured"]
+    assert row["measured"].startswith("early training: 100,000 transitions per trial; clean")
+    assert row["test"].startswith("on clean success: ")
+
+
+def test_judged_on_clean_success_not_on_success(tmp_path: Path) -> None:
+    """The verdict is the clean success's (best at 8, outside the paper's values), and the
+    trials' budget is stated against the reference entry's."""
+    trials = _grid(tmp_path, {**BASE, "10": [0.6, 0.62, 0.61], "8": [0.95] * 3})
+    lb = _lb(tmp_path, trials)
+    row = {r["id"]: r for r in sens.claim_rows(sens.load_study(lb), 1_000_000)}["fig7-T"]
+    assert row["verdict"] == "not held" and "best at 8, outside" in row["measured"]
+    assert "(10 % of the reference Diffusion-AC's 1,000,000)" in row["measured"]
 
 
 def test_not_held_when_best_is_outside_the_papers_values(tmp_path: Path) -> None:
