@@ -21,9 +21,9 @@ For each log, over the lines logged at ``--stage`` (12, the last DPSC stage), it
 * the fixed-evaluation points (``curve/clean_success``, same 100 episodes of ``high``) logged
   at that stage, when the log has them.
 
-Every number in agents/diffusion_ac/README.md about the stage-12 behaviour of a run comes from
-this script. The reward bounds every return by 1.0 (the goal term, docs/model.md §6), so a Q
-above 1 is an overestimate.
+The statistics are :func:`cdr_bench.leaderboard.stage_stats.stage_summary`'s, which also renders
+agents/diffusion_ac/README.md's stage-12 table; the windows are this script's. The reward bounds
+every return by 1.0 (the goal term, docs/model.md §6), so a Q above 1 is an overestimate.
 """
 
 from __future__ import annotations
@@ -34,18 +34,15 @@ import sys
 from pathlib import Path
 
 from cdr_bench.jsonl import existing, read_jsonl
+from cdr_bench.leaderboard.stage_stats import stage_summary
 
 
 def _lines(path: Path) -> list[dict]:
     return read_jsonl(path)
 
 
-def _extreme(rows: list[dict], key: str) -> str:
-    vals = [(r[key], r["step"]) for r in rows if isinstance(r.get(key), (int, float))]
-    if not vals:
-        return "-"
-    v, step = max(vals)
-    return f"{v:+.2f} at {step:,}"
+def _at(x: tuple[float, int] | None) -> str:
+    return "-" if x is None else f"{x[0]:+.2f} at {x[1]:,}"
 
 
 def _windows(rows: list[dict], inside) -> list[list[dict]]:
@@ -65,11 +62,10 @@ def _windows(rows: list[dict], inside) -> list[list[dict]]:
 
 def summarise(path: Path, stage: int, below: float, q_above: float = 1.5) -> str:
     rows = _lines(path)
-    train = [r for r in rows if "step" in r and r.get("curriculum/stage") == stage]
-    if not train:
+    s = stage_summary(rows, stage)  # the numbers of agents/diffusion_ac/README.md's table
+    if s is None:
         return f"{path}: no line at stage {stage}"
-    first = train[0]["step"]
-    succ = [r["charts/success_rolling"] for r in train]
+    train = [r for r in rows if "step" in r and r.get("curriculum/stage") == stage]
     windows = [
         (w[0]["step"], w[-1]["step"], min(r["charts/success_rolling"] for r in w))
         for w in _windows(train, lambda r: r["charts/success_rolling"] < below)
@@ -83,30 +79,30 @@ def summarise(path: Path, stage: int, below: float, q_above: float = 1.5) -> str
             f"{min(r['charts/success_rolling'] for r in w):.2f}, timeout share max "
             f"{max(r.get('charts/timeout', 0.0) for r in w):.2f})"
         )
-    reached = rows[-1].get("final", {}).get("step", train[-1]["step"])
+    sc = s["success"]
     out = [
         f"{path}",
-        f"  stage {stage} from {first:,} to {reached:,} transitions ({len(train)} log lines)",
-        f"  rolling success min {min(succ):.2f}  mean {sum(succ) / len(succ):.2f}  "
-        f"max {max(succ):.2f}  (min after the stage's first line, the window at promotion: "
-        f"{min(succ[1:] or succ):.2f})",
+        f"  stage {stage} from {s['from']:,} to {s['to']:,} transitions ({s['lines']} log lines)",
+        f"  rolling success min {sc['min']:.2f}  mean {sc['mean']:.2f}  max {sc['max']:.2f}  "
+        f"(min after the stage's first line, the window at promotion: "
+        f"{sc['min_after_first']:.2f})",
         "  below {:.2f}: {}".format(
             below,
             "; ".join(f"{a:,}-{b:,} (min {m:.2f})" for a, b, m in windows) or "never",
         ),
-        f"  max TD loss {_extreme(train, 'losses/loss_q')}; max mean Q "
-        f"{_extreme(train, 'losses/q_mean')}; max Q {_extreme(train, 'losses/q_max')}; "
-        f"max TD target {_extreme(train, 'losses/target_max')}",
-        f"  max timeout share {_extreme(train, 'charts/timeout')}",
+        f"  max TD loss {_at(s['td_loss'])}; max mean Q {_at(s['q_mean'])}; max Q "
+        f"{_at(s['q_max'])}; max TD target {_at(s['target_max'])}",
+        f"  max timeout share {_at(s['timeout'])}",
         f"  largest Q above {q_above:+.2f}: {'; '.join(over) or 'never'}",
     ]
-    curve = [r for r in rows if "curve/clean_success" in r and r["step"] >= first]
-    if curve:
-        cs = [r["curve/clean_success"] for r in curve]
+    curve = [r for r in rows if "curve/clean_success" in r and r["step"] >= s["from"]]
+    if s["curve"] is not None:
+        c = s["curve"]
         out.append(
             f"  fixed evaluation ({curve[0]['curve/episodes']} episodes of "
-            f"{curve[0]['curve/scenario']}, {len(curve)} points): clean success min "
-            f"{min(cs):.2f} mean {sum(cs) / len(cs):.2f} max {max(cs):.2f} last {cs[-1]:.2f}"
+            f"{curve[0]['curve/scenario']}, {c['points']} points): clean success min "
+            f"{c['min']:.2f} mean {c['mean']:.2f} max {c['max']:.2f} "
+            f"last {c['last']:.2f}"
         )
     return "\n".join(out)
 

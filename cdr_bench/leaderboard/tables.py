@@ -513,6 +513,105 @@ def training(repo: Repo, name: str, stages: str = "scenarios/curriculum") -> str
     return training_summary(_final(log), log.relative_to(repo.root).as_posix(), n_stages or None)
 
 
+STAGE_SWEEPS = ("sweeps/landed/dac-stability", "sweeps/landed/dac-clip")
+"""Landed Diffusion-AC trials whose training logs the stage table shows beside the shipped
+seeds (each folder's trials, labelled from their ``trial.json`` flags)."""
+
+
+ABLATION_WORDS = {
+    "no-double-q": "no double Q",
+    "no-diffusion": "no diffusion",
+    "no-dpsc": "no DPSC",
+    "no-value-guidance": "no value guidance",
+}
+
+
+def _flags_label(flags: dict[str, Any]) -> str:
+    words = []
+    if flags.get("ablation"):
+        words.append(ABLATION_WORDS.get(str(flags["ablation"]), str(flags["ablation"])))
+    if flags.get("soft-boundary"):
+        words.append("soft boundary")
+    if flags.get("q-target-max") is not None:
+        words.append(f"TD target ≤ {float(flags['q-target-max']):g}")
+    return ", ".join(words) or "reference recipe"
+
+
+def stage_runs(repo: Repo) -> list[tuple[str, Path]]:
+    """The Diffusion-AC training logs of the stage table: ``(label, log)``."""
+    d = repo.root / "agents" / "diffusion_ac"
+    runs = [("seed 1", existing(d / "training_log.jsonl"))]
+    seed_dirs = sorted((d / "seeds").glob("*/"), key=lambda p: int(p.name))
+    runs += [(f"seed {p.name}", existing(p / "training_log.jsonl")) for p in seed_dirs]
+    runs.append(
+        (
+            "cdr-bench 0.1 reference run",
+            existing(d / "analysis" / "reference-0.1" / "training_log.jsonl"),
+        )
+    )
+    abl = d / "ablations" / "no-double-q"
+    runs.append(("no double Q, seed 1", existing(abl / "training_log.jsonl")))
+    runs += [
+        (f"no double Q, seed {p.name}", existing(p / "training_log.jsonl"))
+        for p in sorted((abl / "seeds").glob("*/"), key=lambda p: int(p.name))
+    ]
+    for sweep in STAGE_SWEEPS:
+        trials = []
+        for tj in sorted((repo.root / sweep).glob("*/trial.json")):
+            t = _read_json(tj)
+            label = f"{_flags_label(t['train_flags'])}, seed {t['seed']}"
+            trials.append((label, existing(tj.parent / "log.jsonl")))
+        runs += sorted(trials)
+    return runs
+
+
+def stage_table(repo: Repo, stage: int = 12) -> str:
+    """Each run of :func:`stage_runs` over its lines at ``stage``
+    (:func:`cdr_bench.leaderboard.stage_stats.stage_summary`)."""
+    from cdr_bench.leaderboard.stage_stats import stage_summary
+
+    def at(x: tuple[float, int] | None, fmt: str = "{:+.2f}") -> str:
+        return "-" if x is None else f"{fmt.format(x[0])} at {x[1]:,}"
+
+    head = [
+        "run",
+        f"stage {stage} from",
+        "rolling success min / mean / max",
+        "max TD loss",
+        "max mean Q",
+        "max Q",
+        "max TD target",
+        "max timeout share",
+        "clean success on the fixed set: min / mean / last",
+    ]
+    rows: Rows = []
+    for label, log in stage_runs(repo):
+        s = stage_summary(_read_jsonl_any(log), stage)
+        rel = log.relative_to(repo.root).as_posix()
+        if s is None:
+            rows.append(
+                [Cell(f"{label} (`{rel}`)"), Cell(f"never reached stage {stage}")] + [Cell("-")] * 7
+            )
+            continue
+        sc, cv = s["success"], s["curve"]
+        rows.append(
+            [
+                Cell(f"{label} (`{rel}`)"),
+                Cell(f"{s['from']:,}", s["from"]),
+                Cell(f"{sc['min']:.2f} / {sc['mean']:.2f} / {sc['max']:.2f}", sc["min"]),
+                Cell(at(s["td_loss"], "{:.2f}")),
+                Cell(at(s["q_mean"])),
+                Cell(at(s["q_max"])),
+                Cell(at(s["target_max"])),
+                Cell(at(s["timeout"], "{:.2f}")),
+                Cell(
+                    "-" if cv is None else f"{cv['min']:.2f} / {cv['mean']:.2f} / {cv['last']:.2f}"
+                ),
+            ]
+        )
+    return md_table(head, rows, numeric_from=1)
+
+
 def quick_evals(repo: Repo, logs: Iterable[tuple[str, str]], scenario: str) -> str:
     """``(label, training log relative to the repository)`` of short runs."""
     return quick_eval_table([(label, _final(repo.root / log)) for label, log in logs], scenario)
@@ -616,6 +715,7 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
         ),
         "latency": lambda r: latency_detail_table(r.latency("diffusion-ac")),
         "ablation-seeds": lambda r: measured_seeds(r, ABLATIONS, ["high"]),
+        "stage-12": stage_table,
     },
     "agents/mvp_improve/README.md": {
         "seeds": lambda r: measured_seeds(r, ["mvp-improve", "mvp-improve-2", "mvp"], ["high"]),
