@@ -6,6 +6,7 @@ and, where the agent's own code raised, the agent's own line.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import os
@@ -132,11 +133,14 @@ def agent_files(
     return sorted(set(out))
 
 
+@functools.cache
 def reserved_module_names() -> frozenset[str]:
     """Top-level module names an agent's file may not take: the standard library's, the
     interpreter's built-in modules, every installed distribution's top-level packages, and
     ``cdr_bench``. A file ``json.py`` or ``numpy.py`` in a folder on some process's import path
-    would replace the real module for whatever imports it there."""
+    would replace the real module for whatever imports it there. Computed once per process
+    (reading every distribution's file list takes ~0.6 s; the installed set does not change
+    while a build runs)."""
     from importlib import metadata
 
     names = set(sys.stdlib_module_names) | set(sys.builtin_module_names) | {"cdr_bench"}
