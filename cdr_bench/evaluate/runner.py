@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from cdr_bench.actions import HOLD, N_ACTIONS
+from cdr_bench.actions import N_ACTIONS
 from cdr_bench.evaluate.loader import AgentError
 from cdr_bench.evaluate.remote import (
     DEFAULT_DECISION_TIMEOUT_S,
@@ -262,17 +262,9 @@ def run_batch(
 
     def on_step(actions: np.ndarray, step: VectorStep) -> None:
         """The step's part of every metric (and of the traces)."""
-        nonlocal steps, los, nmac, goal_r, safety_r, invalid, manoeuvres, path_km, flight_s
-        nonlocal before_km, prev_los, prev_nmac, in_conflict, conflict_now
-        manoeuvres += actions != HOLD
+        nonlocal prev_los, prev_nmac, in_conflict, conflict_now
         res = step.result
-        steps += res.acting
         after_km = env.positions_km
-        moved = after_km - before_km
-        part = np.where(res.reached_goal, _goal_entry(before_km, moved, goal_km, goal_radius), 1.0)
-        path_km += np.where(res.acting, part * _norm(moved), 0.0)
-        flight_s += np.where(res.acting, part * dt_s, 0.0)
-        before_km = after_km.copy()
         los_with, nmac_with = res.los_with, res.nmac_with
         env.conflicts(conflict_now)
         kernels.pair_events(
@@ -280,18 +272,15 @@ def run_batch(
         )
         prev_los, prev_nmac = los_with, nmac_with
         in_conflict, conflict_now = conflict_now, in_conflict
-        los_any = los_now.astype(bool)
-        los |= los_any
-        nmac |= nmac_now.astype(bool)
-        goal_r += res.goal_reward
-        safety_r += res.safety_reward
-        invalid += res.invalid_action
-        np.minimum(min_sep, res.min_sep_km, out=min_sep)
-        done = res.outcome != 0
-        outcome[done] = res.outcome[done]
+        kernels.accumulate_step(
+            actions, res.terms, res.flags, res.outcome, res.min_sep_km, before_km, after_km,
+            goal_km, goal_radius, dt_s, counts, manoeuvres, steps, path_km, flight_s, goal_r,
+            safety_r, invalid, min_sep, outcome, los, nmac,
+        )  # fmt: skip
+        before_km[:] = after_km
         for i, t in enumerate(traces):
             if res.acting[i].any():
-                t["frames"].append(_frame(env, i, los_any[i]))
+                t["frames"].append(_frame(env, i, los_now[i].astype(bool)))
 
     fly(env, obs_all, masks_all, decide, on_step=on_step)
 
@@ -368,23 +357,6 @@ def run_batch(
 def _norm(v: np.ndarray) -> np.ndarray:
     """Length of (..., 2) vectors."""
     return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
-
-
-def _goal_entry(
-    before_km: np.ndarray, moved_km: np.ndarray, goal_km: np.ndarray, radius_km: float
-) -> np.ndarray:
-    """Fraction in [0, 1] of a straight step from ``before_km`` by ``moved_km`` flown when it
-    first comes within ``radius_km`` of ``goal_km`` (1 if it never does), elementwise."""
-    px, py = before_km[..., 0] - goal_km[..., 0], before_km[..., 1] - goal_km[..., 1]
-    dx, dy = moved_km[..., 0], moved_km[..., 1]
-    a = dx * dx + dy * dy
-    b = px * dx + py * dy
-    c = px * px + py * py - radius_km * radius_km
-    disc = b * b - a * c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / a
-    t = np.where((a > 0) & (disc >= 0), t, 1.0)
-    return np.where(c <= 0, 0.0, np.clip(t, 0.0, 1.0))
 
 
 def _trace_head(

@@ -1059,6 +1059,65 @@ def _count_entry(before, counts, k, e, m, n, first_controlled):
 
 
 @njit(cache=True)
+def accumulate_step(
+    actions, terms, flags, outcome_now, min_sep_now, before_km, after_km, goal_km, radius_km,
+    dt_s, counts, manoeuvres, steps, path_km, flight_s, goal_r, safety_r, invalid, min_sep,
+    outcome, los, nmac,
+):  # fmt: skip
+    """One step's part of an evaluation's per-aircraft accumulators (the runner's; after
+    :func:`pair_events` has set ``counts[6]`` and ``counts[7]``, in LoS / NMAC now), in place,
+    with the arithmetic of the numpy expressions it replaced, operation for operation (the same
+    bits): manoeuvres (actions other than hold), steps flown, path and flight time (of a step
+    that reached the goal, the fraction in [0, 1] of the straight step flown when it first
+    comes within ``radius_km`` of the goal: 0 if it started inside), the goal and
+    safety reward parts (the terms summed in order), invalid actions, the smallest separation
+    (``np.minimum``: a NaN stays), the outcome of aircraft that finished, LoS and NMAC ever."""
+    E, M = actions.shape
+    rr = radius_km * radius_km
+    for e in range(E):
+        for m in range(M):
+            if actions[e, m] != HOLD:
+                manoeuvres[e, m] += 1
+            acting = flags[e, m, F_ACTING]
+            if acting:
+                steps[e, m] += 1
+            bx, by = before_km[e, m, 0], before_km[e, m, 1]
+            dx, dy = after_km[e, m, 0] - bx, after_km[e, m, 1] - by
+            part = 1.0
+            if flags[e, m, F_REACHED]:
+                px, py = bx - goal_km[e, m, 0], by - goal_km[e, m, 1]
+                a = dx * dx + dy * dy
+                b = px * dx + py * dy
+                c = px * px + py * py - rr
+                disc = b * b - a * c
+                t = 1.0
+                if a > 0 and disc >= 0:
+                    t = (-b - math.sqrt(max(disc, 0.0))) / a
+                if c <= 0:
+                    part = 0.0
+                else:
+                    part = min(max(t, 0.0), 1.0)
+            if acting:
+                path_km[e, m] += part * math.sqrt(dx * dx + dy * dy)
+                flight_s[e, m] += part * dt_s
+            goal_r[e, m] += (
+                terms[e, m, 0] + terms[e, m, 1] + terms[e, m, 2] + terms[e, m, 3] + terms[e, m, 4]
+            )
+            safety_r[e, m] += terms[e, m, 5] + terms[e, m, 6]
+            if flags[e, m, F_INVALID]:
+                invalid[e, m] += 1
+            x = min_sep_now[e, m]
+            if min_sep[e, m] == min_sep[e, m] and (x != x or x < min_sep[e, m]):
+                min_sep[e, m] = x
+            if outcome_now[e, m] != 0:
+                outcome[e, m] = outcome_now[e, m]
+            if counts[6, e, m]:
+                los[e, m] = True
+            if counts[7, e, m]:
+                nmac[e, m] = True
+
+
+@njit(cache=True)
 def pair_events(
     los_with, nmac_with, prev_los, prev_nmac, conflict_now, in_conflict, first_controlled, counts
 ):

@@ -84,7 +84,17 @@ sim = Simulator(load_scenario("marl/low-2"), 2)
 sim.reset([0, 1])
 sim.step(np.full((2, sim.M), 13))
 observe(sim)
-for fn in (kernels.step_episodes, kernels.observe_episodes, kernels.reset_episodes):
+E, M = 2, 1  # the evaluator's per-step accumulator, compiled on small arrays of its dtypes
+f, i, b = np.zeros((E, M)), np.zeros((E, M), np.int64), np.zeros((E, M), bool)
+kernels.accumulate_step(
+    np.full((E, M), 13, np.int64), np.zeros((E, M, 7)), np.zeros((E, M, 6), bool),
+    np.zeros((E, M), np.int8), f.copy(), np.zeros((E, M, 2)), np.ones((E, M, 2)),
+    np.zeros((E, M, 2)), 5.0, 30.0, np.zeros((8, E, M), np.int64), i.copy(), i.copy(),
+    f.copy(), f.copy(), f.copy(), f.copy(), i.copy(), f.copy(), np.zeros((E, M), np.int8),
+    b.copy(), b.copy(),
+)
+for fn in (kernels.step_episodes, kernels.observe_episodes, kernels.reset_episodes,
+           kernels.accumulate_step):
     for sig in fn.signatures:
         asm = fn.inspect_asm(sig)
         assert "vsqrtsd" in asm or "sqrtsd" in asm, fn.__name__  # the inspection saw code
