@@ -7,6 +7,7 @@ on a miniature repository and the import boundary between the leaderboard and th
 from __future__ import annotations
 
 import ast
+import os
 import re
 import shutil
 from pathlib import Path
@@ -35,6 +36,11 @@ def test_every_marked_block_has_a_renderer(rel: str) -> None:
     assert known <= set(names), f"{rel}: registered blocks missing"
 
 
+@pytest.mark.skipif(
+    os.environ.get("CDR_BENCH_DOCS_CHECKED_BY") == "leaderboard-check",
+    reason="CI's `cdr-bench leaderboard build --check`, run beside the tests, renders and "
+    "compares these same blocks; .ci/run fails unless its output says they match",
+)
 def test_doc_blocks_are_what_the_committed_files_produce() -> None:
     # one render of the repository's blocks (the costly part: every result read), through the
     # CLI a contributor runs; it names every stale block and exits non-zero
