@@ -765,6 +765,31 @@ def training_info(
     return budget, curves, fixed
 
 
+def total_transitions(budget: dict[str, Any] | None) -> int | list[int] | None:
+    """An entry's training transitions, its parent's included (:func:`add_parent_budgets`)."""
+    t = (budget or {}).get("transitions")
+    p = (budget or {}).get("parent_transitions")
+    return t + p if isinstance(t, int) and isinstance(p, int) else t
+
+
+def add_parent_budgets(entries: list[Entry], info: dict[str, Any]) -> None:
+    """An entry whose seeds continue another entry's run (``parent: NAME seed K``) trained for
+    its parent's transitions too: ``budget["parent_transitions"]`` is the parent entry's (when
+    every seed names one parent of a known budget), so the pages can show the total."""
+    for e in entries:
+        budget = info[e.name][0]
+        parents = {s.parent for s in e.sub.seeds}
+        if not budget or not isinstance(budget.get("transitions"), int) or None in parents:
+            continue
+        names = {str(p).split(" seed ")[0].strip() for p in parents}
+        if len(names) != 1 or (name := names.pop()) not in info:
+            continue
+        pb = info[name][0] or {}
+        if isinstance(pb.get("transitions"), int):
+            budget["parent_transitions"] = pb["transitions"]
+            budget["parent"] = name
+
+
 SEED_METRIC = "clean_success_rate"
 """The score aggregated over training seeds (the headline metric)."""
 
@@ -881,6 +906,7 @@ def entry_facts(e: Entry) -> dict[str, Any]:
         "name": e.name,
         "display_name": e.sub.display_name,
         "description": e.sub.description,
+        "trained_on": e.sub.trained_on,
         "group": e.sub.group,
         "agent": e.sub.agent,
         "checkpoint": e.sub.checkpoint,
@@ -1072,6 +1098,7 @@ def build_data(
     for e in entries:
         root = e.sub.source.resolve().parent.parent.parent
         info[e.name] = training_info(e.sub, root)
+    add_parent_budgets(entries, info)
 
     replay_entries = [e for e in sorted(entries, key=lambda x: rank_of[x.name]) if e.replays]
     replay_scenarios = [
@@ -1105,7 +1132,7 @@ def build_data(
             latency or {},
             sensitivity,
             {e.name: _fixed_runs(e, info[e.name]) for e in entries},
-            {e.name: (info[e.name][0] or {}).get("transitions") for e in entries},
+            {e.name: total_transitions(info[e.name][0]) for e in entries},
             {e.name: e.multimodal_seeds for e in entries if e.multimodal_seeds},
         ),
         "sensitivity": sensitivity,

@@ -162,16 +162,22 @@ def fmt_diff(kind: str, d: dict[str, Any] | None) -> str:
 
 
 def fmt_budget(b: dict[str, Any] | None) -> tuple[str, str]:
-    """Training transitions and seeds of an entry (``-`` for a scripted or undeclared one)."""
+    """Training transitions and seeds of an entry (``-`` for a scripted or undeclared one); an
+    entry trained on from another's run shows the total and both parts."""
     if not b or b.get("transitions") is None:
         return "-", "-"
     t = b["transitions"]
     text = f"{t:,}" if isinstance(t, int) else f"{t[0]:,}-{t[1]:,}"
+    if isinstance(t, int) and isinstance(b.get("parent_transitions"), int):
+        p = b["parent_transitions"]
+        text = f"{t + p:,} ({p:,} of its parent + {t:,})"
     return text + (" (declared)" if b.get("source") == "declared" else ""), str(b["seeds"])
 
 
 def _transitions(b: dict[str, Any] | None) -> int | None:
     t = (b or {}).get("transitions")
+    if isinstance(t, int) and isinstance((b or {}).get("parent_transitions"), int):
+        return t + b["parent_transitions"]  # type: ignore[index]
     return t if isinstance(t, int) or t is None else t[0]
 
 
@@ -246,7 +252,8 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
         "vs row above",
         header[rk["tie_break"]],
         *[header[k] for k in five],
-        "training transitions",
+        "trained on",
+        "training transitions (total)",
         "seeds",
     ]
     rows: Rows = []
@@ -268,6 +275,7 @@ def ranking_table(data: dict[str, Any]) -> tuple[list[str], Rows, list[str]]:
                 for k in five
             ]
             + [
+                Cell(md_text(e["trained_on"]) if e.get("trained_on") else "-", e.get("trained_on")),
                 Cell(budget, _transitions(e["budget"])),
                 Cell(seeds, None if seeds == "-" else int(seeds)),
             ]

@@ -198,6 +198,10 @@ class Submission:
     multimodality: tuple[str, ...]
     """Scenarios for ``cdr-bench multimodal`` (first-action distributions)."""
     group: str = "scripted"
+    trained_on: str | None = None
+    """Free text: the scenario(s) the checkpoint was trained on (``medium``, ``the DPSC
+    curriculum``, ...), shown in the ranking beside the training budget; ``None``: not said
+    (a scripted entry trains on nothing)."""
     """One of :data:`GROUPS`: ``scripted`` (no training), ``learned`` (learns from scratch),
     ``hybrid`` (a scripted resolver with a learned part, e.g. MVP with a learned override) or
     ``ablation``."""
@@ -321,6 +325,11 @@ def _scenarios(src: Path, field: str, v: Any) -> tuple[tuple[str, ...], str | No
 FIELDS: dict[str, tuple[bool, str]] = {
     "display_name": (False, "name shown in the tables (default: the file name)"),
     "description": (False, "one line: what the agent is"),
+    "trained_on": (
+        False,
+        "one line: the scenario(s) the checkpoint was trained on (shown in the ranking beside "
+        "its training budget)",
+    ),
     "agent": (True, "agent .py file or folder holding agent.py, relative to the repository root"),
     "checkpoint": (
         False,
@@ -532,6 +541,7 @@ def load_submission(
         source=src,
         display_name=_str(src, "display_name", data.get("display_name", name)) or name,
         description=_str(src, "description", data.get("description", "-")) or "-",
+        trained_on=_str(src, "trained_on", data.get("trained_on"), allow_none=True) or None,
         agent=agent,
         checkpoint=checkpoint,
         authors=_str_list(src, "authors", data["authors"], allow_empty=False),
@@ -582,6 +592,7 @@ def _track_scenarios(src: Path, track: str, scenarios: tuple[str, ...]) -> None:
 TEXT_FIELDS: dict[str, int] = {
     "display_name": tx.NAME_MAX,
     "description": tx.DESCRIPTION_MAX,
+    "trained_on": tx.DESCRIPTION_MAX,
     "reference": tx.REFERENCE_MAX,
     "training": tx.TRAINING_MAX,
 }

@@ -94,6 +94,8 @@ TEXT_CASES = {
     "reference url": ("reference", "https://evil.test/a b", "http(s) URL"),
     "reference scheme": ("reference", "javascript:alert(1)", "script URL"),
     "training backtick": ("training", "python t.py ` <img>", "backtick"),
+    "forged trained_on": ("trained_on", FORGED, "one line"),
+    "trained_on link": ("trained_on", "see [run](javascript:alert(1))", "script URL"),
 }
 
 
