@@ -325,11 +325,7 @@ def _scenarios(src: Path, field: str, v: Any) -> tuple[tuple[str, ...], str | No
 FIELDS: dict[str, tuple[bool, str]] = {
     "display_name": (False, "name shown in the tables (default: the file name)"),
     "description": (False, "one line: what the agent is"),
-    "trained_on": (
-        False,
-        "one line: the scenario(s) the checkpoint was trained on (shown in the ranking beside "
-        "its training budget)",
-    ),
+    "trained_on": (False, "one line: the scenario(s) the checkpoint was trained on"),
     "agent": (True, "agent .py file or folder holding agent.py, relative to the repository root"),
     "checkpoint": (
         False,

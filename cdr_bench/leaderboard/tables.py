@@ -518,18 +518,13 @@ STAGE_SWEEPS = ("sweeps/landed/dac-stability", "sweeps/landed/dac-clip")
 seeds (each folder's trials, labelled from their ``trial.json`` flags)."""
 
 
-ABLATION_WORDS = {
-    "no-double-q": "no double Q",
-    "no-diffusion": "no diffusion",
-    "no-dpsc": "no DPSC",
-    "no-value-guidance": "no value guidance",
-}
-
-
 def _flags_label(flags: dict[str, Any]) -> str:
     words = []
     if flags.get("ablation"):
-        words.append(ABLATION_WORDS.get(str(flags["ablation"]), str(flags["ablation"])))
+        part = str(flags["ablation"]).removeprefix("no-")
+        words.append(
+            "no " + {"double-q": "double Q", "dpsc": "DPSC"}.get(part, part.replace("-", " "))
+        )
     if flags.get("soft-boundary"):
         words.append("soft boundary")
     if flags.get("q-target-max") is not None:
