@@ -150,6 +150,21 @@ def test_ablation_over_seeds_held_only_when_every_seed_pair_separates(monkeypatc
     assert "= 0.50 [0.50, 0.50]" not in tied["measured"]  # episodes resampled too
 
 
+def test_ablation_judged_on_clean_success_not_on_success(monkeypatch) -> None:
+    """The complete method succeeds more often but loses separation more often: on clean
+    success (the verdict's metric) the ablation is not worse."""
+    monkeypatch.setattr(FakeEntry, "scenario", _seeded_scenario, raising=True)
+    by_row = {
+        cl.COMPLETE: SeededEntry("diffusion-ac", [999] * 5, [850, 852, 851, 849, 853]),
+        "W/O DPSC": SeededEntry("no-dpsc", [950, 951, 949], [900, 905, 898]),
+    }
+    out = cl.build_claims(by_row, FakePaired(), PUB, {}, {}, None, None, None)
+    row = next(c for c in out if c["id"] == "ablation-W/O DPSC")
+    assert row["verdict"] == "not held" and row["test"].startswith("on clean success")
+    assert row["measured"].startswith("clean success, mean over seeds: 85.1 % (5 seeds)")
+    assert "success 99.9 % vs 95.0 %" in row["measured"]
+
+
 def test_ablation_at_another_budget_is_not_measured(monkeypatch) -> None:
     good, bad = [990, 992, 995, 991, 993], [900, 910, 880]
     same = {"diffusion-ac": 1_374_560, "no-dpsc": 1_374_560}
@@ -186,7 +201,7 @@ def test_dpsc_convergence_measured_with_three_seeds_of_each() -> None:
     assert r["reduction"] == pytest.approx(1 / 3) and r["ci95"] == pytest.approx([1 / 3, 1 / 3])
 
     def verdict(complete, ablated) -> dict[str, Any]:
-        rates = {"success_rate": 0.9, "los_rate": 0.1, "nmac_rate": 0.01}
+        rates = {"success_rate": 0.9, "clean_success_rate": 0.8, "los_rate": 0.1, "nmac_rate": 0.01}
         by_row = {cl.COMPLETE: FakeEntry("dac", rates), "W/O DPSC": FakeEntry("nd", rates)}
         training = {"dac": complete, "nd": ablated}
         out = cl.build_claims(by_row, FakePaired(), PUB, {}, {}, None, training)
