@@ -61,7 +61,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar, overload
 
 import numpy as np
 from gymnasium import spaces
@@ -109,6 +109,30 @@ def _read_only(a: NDArray[Any]) -> NDArray[Any]:
     view = a.view()
     view.flags.writeable = False
     return view
+
+
+_D = TypeVar("_D", bound=np.generic)
+
+
+class _SimView(Generic[_D]):
+    """An attribute of :class:`VectorEnv`: the simulator's array ``name`` as a live read-only
+    view (:func:`_read_only`); the docstring under the attribute documents it."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __set_name__(self, owner: type, attr: str) -> None:
+        self.attr = attr
+
+    @overload
+    def __get__(self, env: None, owner: type) -> _SimView[_D]: ...
+    @overload
+    def __get__(self, env: VectorEnv, owner: type) -> NDArray[_D]: ...
+    def __get__(self, env: VectorEnv | None, owner: type) -> _SimView[_D] | NDArray[_D]:
+        return self if env is None else _read_only(getattr(env.sim, self.name))
+
+    def __set__(self, env: VectorEnv, value: object) -> None:
+        raise AttributeError(f"VectorEnv.{self.attr} is read-only")
 
 
 def agent_ids(config: ScenarioConfig) -> list[str]:
@@ -413,42 +437,22 @@ class VectorEnv:
         """(E, M) aircraft in the sky now (a copy)."""
         return self.sim.ac_active.copy()
 
-    @property
-    def positions_km(self) -> NDArray[np.float64]:
-        """(E, M, 2) position (x east, y north) of every controlled aircraft, km."""
-        return _read_only(self.sim.ac_pos_km)
-
-    @property
-    def goals_km(self) -> NDArray[np.float64]:
-        """(E, M, 2) goal position of every controlled aircraft, km."""
-        return _read_only(self.sim.ac_goal_km)
-
-    @property
-    def heading_vectors(self) -> NDArray[np.float64]:
-        """(E, M, 2) unit vector (east, north) of the heading of every controlled aircraft."""
-        return _read_only(self.sim.ac_dir)
-
-    @property
-    def speeds_kt(self) -> NDArray[np.float64]:
-        """(E, M) airspeed of every controlled aircraft, kt."""
-        return _read_only(self.sim.ac_speed_kt)
-
-    @property
-    def levels(self) -> NDArray[np.int64]:
-        """(E, M) flight level index (0..2) of every controlled aircraft."""
-        return _read_only(self.sim.ac_level)
-
-    @property
-    def outcomes(self) -> NDArray[np.int8]:
-        """(E, M) outcome code of every controlled aircraft (:data:`cdr_bench.sim.OUTCOME_NAMES`):
-        that of its finished flight, 0 while it flies."""
-        return _read_only(self.sim.ac_outcome)
-
-    @property
-    def episode_steps(self) -> NDArray[np.int64]:
-        """(E,) steps taken by each episode since it started (it stops counting when the
-        episode's last aircraft finishes)."""
-        return _read_only(self.sim.steps)
+    positions_km = _SimView[np.float64]("ac_pos_km")
+    """(E, M, 2) position (x east, y north) of every controlled aircraft, km."""
+    goals_km = _SimView[np.float64]("ac_goal_km")
+    """(E, M, 2) goal position of every controlled aircraft, km."""
+    heading_vectors = _SimView[np.float64]("ac_dir")
+    """(E, M, 2) unit vector (east, north) of the heading of every controlled aircraft."""
+    speeds_kt = _SimView[np.float64]("ac_speed_kt")
+    """(E, M) airspeed of every controlled aircraft, kt."""
+    levels = _SimView[np.int64]("ac_level")
+    """(E, M) flight level index (0..2) of every controlled aircraft."""
+    outcomes = _SimView[np.int8]("ac_outcome")
+    """(E, M) outcome code of every controlled aircraft (:data:`cdr_bench.sim.OUTCOME_NAMES`):
+    that of its finished flight, 0 while it flies."""
+    episode_steps = _SimView[np.int64]("steps")
+    """(E,) steps taken by each episode since it started (it stops counting when the
+    episode's last aircraft finishes)."""
 
     @property
     def n_background(self) -> int:
@@ -461,21 +465,13 @@ class VectorEnv:
         ``m`` in slot ``B + m`` (the last axis of :meth:`conflicts` and of ``los_with``)."""
         return int(self.sim.N)
 
-    @property
-    def aircraft_positions_km(self) -> NDArray[np.float64]:
-        """(E, N, 2) position of every aircraft slot, km (a slot not in the sky keeps a stale
-        value: see :attr:`aircraft_in_sky`)."""
-        return _read_only(self.sim.pos_km)
-
-    @property
-    def aircraft_levels(self) -> NDArray[np.int64]:
-        """(E, N) flight level index of every aircraft slot."""
-        return _read_only(self.sim.level)
-
-    @property
-    def aircraft_in_sky(self) -> NDArray[np.bool_]:
-        """(E, N) the slot holds an aircraft in the sky now."""
-        return _read_only(self.sim.active)
+    aircraft_positions_km = _SimView[np.float64]("pos_km")
+    """(E, N, 2) position of every aircraft slot, km (a slot not in the sky keeps a stale
+    value: see :attr:`aircraft_in_sky`)."""
+    aircraft_levels = _SimView[np.int64]("level")
+    """(E, N) flight level index of every aircraft slot."""
+    aircraft_in_sky = _SimView[np.bool_]("active")
+    """(E, N) the slot holds an aircraft in the sky now."""
 
     def observe(self) -> tuple[NDArray[np.float32], NDArray[np.int8]]:
         """(E, M, F) observations and (E, M, 27) masks of the current state."""

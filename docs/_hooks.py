@@ -18,7 +18,8 @@ mkdocs.yml). Not a page: ``exclude_docs`` keeps it out of the site.
   to the site as ``leaderboard/results.md`` and its files, read where it is committed.
 * :class:`RstToMarkdown` (a griffe extension) turns the reStructuredText idioms of the package's
   docstrings into Markdown for mkdocstrings: ``:class:`x``` roles, ``::`` literal blocks,
-  ``>>>`` examples and simple ``====`` tables.
+  ``>>>`` examples and simple ``====`` tables; :class:`SimViews` (another) shows the state
+  views of ``VectorEnv`` as the read-only properties they are.
 """
 
 from __future__ import annotations
@@ -144,6 +145,22 @@ class RstToMarkdown(griffe.Extension):
     def on_instance(self, *, obj: griffe.Object, **kwargs: Any) -> None:
         if obj.docstring is not None:
             obj.docstring.value = rst_to_markdown(obj.docstring.value)
+
+
+class SimViews(griffe.Extension):
+    """Shows the attributes ``name = _SimView[dtype]("...")`` of :class:`cdr_bench.VectorEnv`
+    (live read-only views of the simulator's arrays) as the read-only properties they are, of
+    type ``NDArray[dtype]``, instead of class attributes with that value."""
+
+    def on_attribute_instance(self, *, attr: griffe.Attribute, **kwargs: Any) -> None:
+        view = attr.value
+        if isinstance(view, griffe.ExprCall) and isinstance(view.function, griffe.ExprSubscript):
+            if str(view.function.left) == "_SimView":
+                attr.annotation = griffe.ExprSubscript(
+                    griffe.ExprName("NDArray", parent=attr), view.function.slice
+                )
+                attr.labels = {"property"}
+                attr.value = None
 
 
 # -- generated page parts --------------------------------------------------------------------------

@@ -338,18 +338,17 @@ def _groups(actions: NDArray[np.int64], n_act: int) -> tuple[NDArray[np.int64], 
     return order, start
 
 
+NoisyLayer = tuple[NDArray[np.float32], ...]
+"""A noisy linear layer with O outputs and I inputs and its noise sample: ``(mu, sigma, mu_b,
+sigma_b, eps_in, eps_out)``, mu and sigma (O, I), mu_b, sigma_b and eps_out (O,), eps_in (I,)."""
+
+
 @njit(cache=True, fastmath={"reassoc", "contract"}, inline="always")
 def _centred_row(
-    mu: NDArray[np.float32],
-    sigma: NDArray[np.float32],
-    eps_in: NDArray[np.float32],
-    eps_out: NDArray[np.float32],
-    w_mean: NDArray[np.float32],
-    o: int,
-    j: int,
-    row: NDArray[np.float32],
+    layer: NoisyLayer, w_mean: NDArray[np.float32], o: int, j: int, row: NDArray[np.float32]
 ) -> None:
     """``row`` = row ``o`` of the noisy weights minus the mean row ``j`` over actions."""
+    mu, sigma, _, _, eps_in, eps_out = layer
     eo = eps_out[o]
     m, sg, wm = mu[o], sigma[o], w_mean[j]
     for i in range(row.shape[0]):
@@ -359,12 +358,7 @@ def _centred_row(
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def noisy_head_forward(
     h: NDArray[np.float32],
-    mu: NDArray[np.float32],
-    sigma: NDArray[np.float32],
-    mu_b: NDArray[np.float32],
-    sigma_b: NDArray[np.float32],
-    eps_in: NDArray[np.float32],
-    eps_out: NDArray[np.float32],
+    layer: NoisyLayer,
     actions: NDArray[np.int64],
     k: int,
     out: NDArray[np.float32],
@@ -374,6 +368,7 @@ def noisy_head_forward(
     """``out`` (N, K) = taken-action logits minus the mean over actions; ``w_mean`` (K, I),
     ``b_mean`` (K,) are written (kept for the backward pass). Samples grouped by action: each
     row of W is formed once."""
+    mu, sigma, mu_b, sigma_b, eps_in, eps_out = layer
     width = h.shape[1]
     n_act = mu.shape[0] // k
     inv = np.float32(1.0 / n_act)
@@ -397,7 +392,7 @@ def noisy_head_forward(
             continue
         for j in range(k):
             o = a * k + j
-            _centred_row(mu, sigma, eps_in, eps_out, w_mean, o, j, row)
+            _centred_row(layer, w_mean, o, j, row)
             bias = mu_b[o] + sigma_b[o] * eps_out[o] - b_mean[j]
             for p in range(start[a], start[a + 1]):
                 n = order[p]
@@ -411,21 +406,17 @@ def noisy_head_forward(
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def noisy_head_backward(
     h: NDArray[np.float32],
-    mu: NDArray[np.float32],
-    sigma: NDArray[np.float32],
-    eps_in: NDArray[np.float32],
-    eps_out: NDArray[np.float32],
+    layer: NoisyLayer,
     actions: NDArray[np.int64],
     k: int,
     w_mean: NDArray[np.float32],
     grad_out: NDArray[np.float32],
-    grad_h: NDArray[np.float32],
-    grad_mu: NDArray[np.float32],
-    grad_sigma: NDArray[np.float32],
-    grad_mu_b: NDArray[np.float32],
-    grad_sigma_b: NDArray[np.float32],
+    grads: tuple[NDArray[np.float32], ...],
 ) -> None:
-    """Writes every gradient (no zeroing needed); each row of the weights' gradients once."""
+    """Writes every gradient, ``grads`` = those of (h, mu, sigma, mu_b, sigma_b) (no zeroing
+    needed); each row of the weights' gradients once."""
+    mu, _, _, _, eps_in, eps_out = layer
+    grad_h, grad_mu, grad_sigma, grad_mu_b, grad_sigma_b = grads
     n_rows, width = h.shape
     n_act = mu.shape[0] // k
     inv = np.float32(1.0 / n_act)
@@ -453,7 +444,7 @@ def noisy_head_backward(
                 row[i] = -inv * gm[i]
             gb = -inv * gb_mean[j]
             if start[a] < start[a + 1]:
-                _centred_row(mu, sigma, eps_in, eps_out, w_mean, o, j, wrow)
+                _centred_row(layer, w_mean, o, j, wrow)
                 for p in range(start[a], start[a + 1]):
                     n = order[p]
                     g = grad_out[n, j]
@@ -471,14 +462,9 @@ def noisy_head_backward(
 
 
 @njit(cache=True, fastmath={"contract"})
-def noisy_weight(
-    mu: NDArray[np.float32],
-    sigma: NDArray[np.float32],
-    eps_in: NDArray[np.float32],
-    eps_out: NDArray[np.float32],
-    out: NDArray[np.float32],
-) -> None:
+def noisy_weight(layer: NoisyLayer, out: NDArray[np.float32]) -> None:
     """out = mu + sigma * (eps_out eps_in^T), in one pass."""
+    mu, sigma, _, _, eps_in, eps_out = layer
     for o in range(mu.shape[0]):
         eo = eps_out[o]
         m, s, w = mu[o], sigma[o], out[o]

@@ -102,6 +102,11 @@ class NoisyLinear(nn.Module):
             return self.input_epsilon, self.bias_epsilon
         return torch.zeros_like(self.input_epsilon), torch.zeros_like(self.bias_epsilon)
 
+    def parameters_and_noise(self) -> tuple[torch.Tensor, ...]:
+        """(mu_w, sigma_w, mu_b, sigma_b, f(eps_in), f(eps_out)), the noise in use (the layout of
+        :data:`cdr_bench.rl.kernels.NoisyLayer`)."""
+        return (self.weight_mu, self.weight_sigma, self.bias_mu, self.bias_sigma, *self.noise())
+
     def weights(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The weight and bias in use: noisy in training mode, the means in eval mode."""
         if self.training:
@@ -189,31 +194,26 @@ class NoisyHead(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: Any, h, mu, sigma, mu_b, sigma_b, eps_in, eps_out, actions, k):  # type: ignore[override]
-        h = h.contiguous()
-        h_, mu_, sigma_, mu_b_, sigma_b_, eps_in_, eps_out_ = (
-            x.detach().numpy() for x in (h, mu, sigma, mu_b, sigma_b, eps_in, eps_out)
-        )
+        tensors = (h.contiguous(), mu, sigma, mu_b, sigma_b, eps_in, eps_out)
+        ctx.save_for_backward(*tensors)
+        h_, *layer = (x.detach().numpy() for x in tensors)
         a = actions.numpy()
         out = np.empty((h.shape[0], k), np.float32)
         w_mean = np.empty((k, h.shape[1]), np.float32)
         b_mean = np.empty(k, np.float32)
-        kernels.noisy_head_forward(
-            h_, mu_, sigma_, mu_b_, sigma_b_, eps_in_, eps_out_, a, k, out, w_mean, b_mean
-        )
-        ctx.save_for_backward(h, mu, sigma, eps_in, eps_out)
+        kernels.noisy_head_forward(h_, tuple(layer), a, k, out, w_mean, b_mean)
         ctx.extra = (a, k, w_mean)
         return torch.from_numpy(out)
 
     @staticmethod
     def backward(ctx: Any, grad_out: torch.Tensor):  # type: ignore[override]
-        h, mu, sigma, eps_in, eps_out = (x.detach().numpy() for x in ctx.saved_tensors)
+        h, *layer = (x.detach().numpy() for x in ctx.saved_tensors)
         a, k, w_mean = ctx.extra
-        grads = [np.empty_like(x) for x in (h, mu, sigma, eps_out, eps_out)]
+        grads = tuple(np.empty_like(x) for x in (h, *layer[:4]))
         kernels.noisy_head_backward(
-            h, mu, sigma, eps_in, eps_out, a, k, w_mean, grad_out.contiguous().numpy(), *grads
+            h, tuple(layer), a, k, w_mean, grad_out.contiguous().numpy(), grads
         )
-        g_h, g_mu, g_sigma, g_mu_b, g_sigma_b = (torch.from_numpy(x) for x in grads)
-        return g_h, g_mu, g_sigma, g_mu_b, g_sigma_b, None, None, None, None
+        return *(torch.from_numpy(x) for x in grads), None, None, None, None
 
 
 class RainbowNet(nn.Module):
@@ -270,11 +270,7 @@ class RainbowNet(nn.Module):
             full = out(hidden).view(-1, N_ACTIONS, self.cfg.n_atoms)
             rows = torch.arange(full.shape[0], device=full.device)
             return F.log_softmax(v + full[rows, actions] - full.mean(dim=1), dim=-1)
-        eps_in, eps_out = out.noise()
-        d = NoisyHead.apply(
-            hidden, out.weight_mu, out.weight_sigma, out.bias_mu, out.bias_sigma,
-            eps_in, eps_out, actions, self.cfg.n_atoms,
-        )  # fmt: skip
+        d = NoisyHead.apply(hidden, *out.parameters_and_noise(), actions, self.cfg.n_atoms)
         return F.log_softmax(v + d, dim=-1)
 
     def q_values(self, obs: torch.Tensor) -> torch.Tensor:
@@ -293,10 +289,9 @@ class RainbowNet(nn.Module):
         v = self.value(h)
         hidden = self.advantage[1](self.advantage[0](h))
         out: NoisyLinear = self.advantage[2]  # type: ignore[assignment]
-        eps_in, eps_out = (x.detach().numpy() for x in out.noise())
-        mu, sigma = out.weight_mu.detach().numpy(), out.weight_sigma.detach().numpy()
-        w = np.empty_like(mu)
-        kernels.noisy_weight(mu, sigma, eps_in, eps_out, w)
+        layer = tuple(x.detach().numpy() for x in out.parameters_and_noise())
+        w = np.empty_like(layer[0])
+        kernels.noisy_weight(layer, w)
         adv = torch.mm(hidden, torch.from_numpy(w).t())
         b = torch.addcmul(out.bias_mu, out.bias_sigma, out.noise()[1]).detach()
         q = np.empty((len(obs), N_ACTIONS), np.float32)
