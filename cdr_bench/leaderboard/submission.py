@@ -65,7 +65,7 @@ import yaml
 from cdr_bench.errors import ScenarioError, UserError, short_repr
 from cdr_bench.evaluate.results import LOG_SUFFIX
 from cdr_bench.leaderboard import text as tx
-from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_problem
+from cdr_bench.scenarios.loader import _read_text, _ScenarioYamlLoader, _yaml_problem, parse_yaml
 
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9-]{0,63}$")
 GROUPS = ("scripted", "learned", "hybrid", "ablation")
@@ -147,7 +147,7 @@ def _read_yaml(src: Path) -> Any:
     except ScenarioError as e:
         raise SubmissionError(src, "", e.message) from None
     try:
-        return yaml.load(text, Loader=_SubmissionYamlLoader)  # noqa: S506 - a SafeLoader
+        return parse_yaml(text, _SubmissionYamlLoader)
     except yaml.YAMLError as e:
         problem = _yaml_problem(e).removeprefix("invalid YAML")
         raise SubmissionError(src, "", f"not valid YAML{problem}") from None

@@ -7,7 +7,9 @@ the real ``build --evaluate`` (sandboxed subprocesses, 8 episodes per scenario).
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -19,6 +21,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 EPISODES = 8
+NO_FRESH = ("--fresh-episodes", 0)
+"""Flags of a ``--check`` that tests another part of the check: no entry flies the 200 fresh
+episodes (tests/leaderboard/test_verify.py tests those)."""
 
 WEAVE_AGENT = textwrap.dedent(
     """
@@ -125,8 +130,24 @@ def make_repo(root: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def evaluated_repo(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The miniature repository after ``build --evaluate`` (do not modify: copy it)."""
-    root = tmp_path_factory.mktemp("lb-repo")
+    """The miniature repository after ``build --evaluate`` (do not modify: copy it). Built once
+    per test run: the pytest-xdist processes share the temporary folder's parent, and the first
+    to ask builds it there under a lock while the others wait (each process used to build its
+    own, 10-15 s of CPU each)."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # this run's own
+    root, built = shared / "lb-repo", shared / "lb-repo.built"
+    with (shared / "lb-repo.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not built.exists():
+            shutil.rmtree(root, ignore_errors=True)  # a build that failed before
+            root.mkdir()
+            _evaluate(root)
+            built.touch()
+    return root
+
+
+def _evaluate(root: Path) -> None:
     make_repo(root)
     r = cdr(
         "leaderboard",
@@ -141,7 +162,6 @@ def evaluated_repo(tmp_path_factory: pytest.TempPathFactory) -> Path:
         cwd=root,
     )
     assert r.returncode == 0, r.stderr
-    return root
 
 
 @pytest.fixture

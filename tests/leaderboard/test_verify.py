@@ -16,7 +16,7 @@ import pytest
 
 from cdr_bench.evaluate.results import compress_log, log_text, sha256_text
 from cdr_bench.leaderboard.verify import MIN_AGREEMENT, agreement_verdict, replay_result
-from tests.leaderboard.conftest import EPISODES, cdr, submission_yaml
+from tests.leaderboard.conftest import EPISODES, NO_FRESH, cdr, submission_yaml
 
 CHECK = ("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1)
 
@@ -71,7 +71,7 @@ def test_check_fails_on_a_forged_log_and_names_it(repo: Path) -> None:
     i = max(i for i, r in enumerate(recs) if r["scenario"] == "low")
     recs[i]["aircraft"][0]["goal_reward"] += 1.0
     _rewrite(res, recs)
-    r = cdr(*CHECK, cwd=repo)
+    r = cdr(*CHECK, *NO_FRESH, cwd=repo)
     assert r.returncode == 1, r.stderr
     assert "results/weave.seed-2.json: the per-episode log is not what" in r.stderr
     assert f"low episode {EPISODES - 1}" in r.stderr
@@ -91,7 +91,7 @@ def test_agent_rerun_catches_records_that_are_not_the_agents(repo: Path) -> None
     assert forged != direct
     _rewrite(res / "direct.json", forged)
     assert replay_result(res / "direct.json") == (4 * EPISODES, [])
-    r = cdr(*CHECK, "--rerun-batches", 4, "--sample-seed", 1, cwd=repo)
+    r = cdr(*CHECK, *NO_FRESH, "--rerun-batches", 4, "--sample-seed", 1, cwd=repo)
     assert r.returncode == 1, r.stderr
     assert "results/direct.json: direct: agent re-run on" in r.stderr
     assert "tolerance 99 %" in r.stderr
@@ -152,7 +152,7 @@ def test_rerun_tolerance(repo: Path, flip: float, passes: bool) -> None:
     doc["agent"] = agent_identity(repo / "agents" / "noisy" / "agent.py", checkpoint=None)
     doc["agent"]["path"] = "agents/noisy/agent.py"
     (lb / "results" / "noisy.json").write_text(json.dumps(doc, indent=1) + "\n")
-    r = cdr(*CHECK, "--evaluate", "noisy", "--rerun-batches", 4, cwd=repo)
+    r = cdr(*CHECK, *NO_FRESH, "--evaluate", "noisy", "--rerun-batches", 4, cwd=repo)
     assert "noisy: agent re-run on" in r.stderr, r.stderr
     if passes:
         assert "100.00 %" in r.stderr
@@ -245,9 +245,11 @@ def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path
     scored = read_result(lb / "results" / "seer.json")
     high = next(s for s in scored["scenarios"] if s["id"] == "high")["metrics"]["ownship"]
     assert high["episodes"] == EPISODES and high["clean_success_rate"]["count"] >= 4
-    # without the fresh-episode test it passes every other check
-    r = cdr(*CHECK, "--fresh-episodes", 0, "--rerun-batches", 4, cwd=repo)
+    # without the fresh-episode test it passes every other check (its agent asked again only:
+    # the other entries' agents are asked below)
+    r = cdr(*CHECK, *NO_FRESH, "--evaluate", "seer", "--rerun-batches", 4, cwd=repo)
     assert r.returncode == 0, r.stderr
+    assert "seer: agent re-run on" in r.stderr and "direct: agent re-run" not in r.stderr
     r = cdr(*CHECK, cwd=repo)
     assert r.returncode == 1, r.stderr
     assert "seer: 200 fresh high episodes (base seed " in r.stderr
@@ -287,12 +289,13 @@ def test_scored_reset_seeds_are_not_the_public_ones(repo: Path) -> None:
     assert r.returncode == 0, r.stderr
     doc = json.loads((lb / "results" / "seeds.json").read_text())
     assert len(doc["agent_seed_key"]) == 32
-    r = cdr(*CHECK, "--rerun-batches", 4, "--fresh-episodes", 0, cwd=repo)
+    only_seeds = (*NO_FRESH, "--evaluate", "seeds", "--rerun-batches", 4)
+    r = cdr(*CHECK, *only_seeds, cwd=repo)
     assert r.returncode == 0, r.stderr
     assert "seeds: agent re-run on" in r.stderr and "(100.00 %" in r.stderr
     doc["agent_seed_key"] = "0" * 32  # another key: another agent's decisions
     (lb / "results" / "seeds.json").write_text(json.dumps(doc, indent=1) + "\n")
-    r = cdr(*CHECK, "--rerun-batches", 4, "--fresh-episodes", 0, cwd=repo)
+    r = cdr(*CHECK, *only_seeds, cwd=repo)
     assert r.returncode == 1 and "seeds: agent re-run on" in r.stderr, r.stderr
 
 
