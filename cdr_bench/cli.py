@@ -256,7 +256,10 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(trainers: bool = True) -> argparse.ArgumentParser:
+    """The ``cdr-bench`` parser; ``trainers=False``: ``train`` without its algorithms' flags
+    (what every other command needs: building them imports each trainer module, a fifth of a
+    second at every start)."""
     parser = argparse.ArgumentParser(
         prog="cdr-bench",
         description="Benchmark suite for learned air-traffic conflict detection and resolution.",
@@ -269,12 +272,16 @@ def build_parser() -> argparse.ArgumentParser:
             if e.name and name.startswith(e.name):
                 continue
             raise
-        module.register(sub)
+        if trainers or name != "cdr_bench.rl.cli":
+            module.register(sub)
+        else:
+            module.register_command(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(trainers="train" in argv)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -1,10 +1,19 @@
+"""One thread per library in every test process and in what it starts (the environment is
+inherited): pytest-xdist runs one test process per core, and a library that starts a thread per
+core in each of them (PyTorch's and OpenBLAS's pools) oversubscribes the machine; a test that
+needs another setting sets it."""
+
 from __future__ import annotations
 
+import os
 from typing import Any
 
-import pytest
+for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from cdr_bench.scenarios import ScenarioConfig, load_scenario
+import pytest  # noqa: E402 - after the thread settings, before numpy loads
+
+from cdr_bench.scenarios import ScenarioConfig, load_scenario  # noqa: E402
 
 
 def make_config(**overrides: Any) -> ScenarioConfig:

@@ -38,8 +38,17 @@ def args_class(name: str) -> type:
     return algorithm.args if algorithm is not None else module.Args  # type: ignore[no-any-return]
 
 
+_HELP = "train a learned reference agent"
+
+
+def register_command(sub: Any) -> None:
+    """``train`` listed with its help only (:func:`cdr_bench.cli.build_parser` registers its
+    algorithms only when the command line names ``train``)."""
+    sub.add_parser("train", help=_HELP)
+
+
 def register(sub: Any) -> None:
-    tr = sub.add_parser("train", help="train a learned reference agent")
+    tr = sub.add_parser("train", help=_HELP)
     algos = tr.add_subparsers(dest="algorithm", required=True, metavar="ALGORITHM")
     for name, module_name in TRAINERS.items():
         try:
