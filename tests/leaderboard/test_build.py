@@ -20,6 +20,10 @@ from tests.leaderboard.conftest import (
     submission_yaml,
 )
 
+CHECK = ("leaderboard", "build", "--check", "--reference", "weave", "--workers", 1, *NO_FRESH)
+"""The check of the miniature leaderboard, for the tests of its pages and files (no entry flies
+fresh episodes: tests/leaderboard/test_verify.py tests those)."""
+
 
 def test_build_renders_tables_plots_and_is_deterministic(repo: Path) -> None:
     lb = repo / "leaderboard"
@@ -137,17 +141,7 @@ def test_check_reproduces_everything_but_a_tampered_line(repo: Path) -> None:
     tampered = readme.replace(m.group(0), m.group(0).replace(m.group(1), "99.9"), 1)
     assert tampered != readme
     (lb / "README.md").write_text(tampered)
-    r = cdr(
-        "leaderboard",
-        "build",
-        "--check",
-        "--reference",
-        "weave",
-        "--workers",
-        1,
-        *NO_FRESH,
-        cwd=repo,
-    )
+    r = cdr(*CHECK, cwd=repo)
     assert r.returncode == 1
     assert "check FAILED" in r.stderr
     assert "--- committed/README.md" in r.stderr and "+++ now/README.md" in r.stderr
@@ -165,17 +159,7 @@ def test_check_fails_on_tampered_result_file(repo: Path) -> None:
     log = lb / "results" / "direct.jsonl.xz"
     text = log_text(log).replace('"outcome":"', '"outcome":"x', 1)
     log.write_bytes(compress_log(text))
-    r = cdr(
-        "leaderboard",
-        "build",
-        "--check",
-        "--reference",
-        "weave",
-        "--workers",
-        1,
-        *NO_FRESH,
-        cwd=repo,
-    )
+    r = cdr(*CHECK, cwd=repo)
     assert r.returncode == 1
     assert "results/direct.json" in r.stderr
     assert "does not match it (episodes_sha256 differs" in r.stderr
@@ -377,17 +361,7 @@ def test_every_seed_scored_on_the_same_episodes_and_aggregated(repo: Path) -> No
     doc = json.loads(p.read_text())
     doc["episodes_sha256"] = sha256_text(forged)
     p.write_text(json.dumps(doc, indent=1) + "\n")
-    r = cdr(
-        "leaderboard",
-        "build",
-        "--check",
-        "--reference",
-        "weave",
-        "--workers",
-        1,
-        *NO_FRESH,
-        cwd=repo,
-    )
+    r = cdr(*CHECK, cwd=repo)
     assert r.returncode == 1 and "weave.seed-2.json" in r.stderr, r.stderr
     p.unlink()
     (res / "weave.seed-2.jsonl.xz").unlink()
