@@ -81,30 +81,47 @@ def mish_forward_derivative(
 # input projection [q | k | v] (3W). Per head (width d = W / heads) the scores are
 # s_ij = (q_i . k_j) / sqrt(d), a_ij = softmax_j s_ij, and the output is the sum over the queries
 # of the attention outputs: out = sum_i sum_j a_ij v_j = sum_j c_j v_j with c_j = sum_i a_ij.
-# Row n of the output takes token 0 from row h_idx[n] of its table, token 1 from row t_idx[n],
-# token 2 from row n.
+
+Tokens = tuple[
+    NDArray[np.float32],
+    NDArray[np.int64],
+    NDArray[np.float32],
+    NDArray[np.int64],
+    NDArray[np.float32],
+]
+"""The three tokens' [q | k | v] tables and the rows taken from them: ``(qkv0, idx0, qkv1, idx1,
+qkv2)``. Row n of the output takes token 0 from row ``idx0[n]`` of qkv0, token 1 from row
+``idx1[n]`` of qkv1, token 2 from row n of qkv2 (float32 tables, int64 indices)."""
+
+
+@njit(cache=True, inline="always")
+def _attention_sizes(tokens: Tokens, heads: int) -> tuple[int, int, int, np.float32]:
+    """The output's rows N and width W, the head width d and the scores' scale 1 / sqrt(d)."""
+    qkv2 = tokens[4]
+    w = qkv2.shape[1] // 3
+    d = w // heads
+    return qkv2.shape[0], w, d, np.float32(1.0 / np.sqrt(d))
+
+
+@njit(cache=True, inline="always")
+def _token_rows(
+    tokens: Tokens, n: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+    """The rows of the three tables that row ``n`` of the output takes its tokens from."""
+    qkv0, idx0, qkv1, idx1, qkv2 = tokens
+    return qkv0[idx0[n]], qkv1[idx1[n]], qkv2[n]
 
 
 @njit(cache=True)
 def attention_forward(
-    qkv0: NDArray[np.float32],
-    idx0: NDArray[np.int64],
-    qkv1: NDArray[np.float32],
-    idx1: NDArray[np.int64],
-    qkv2: NDArray[np.float32],
-    heads: int,
-    out: NDArray[np.float32],
-    attn: NDArray[np.float32],
+    tokens: Tokens, heads: int, out: NDArray[np.float32], attn: NDArray[np.float32]
 ) -> None:
     """``out`` (N, W) and the attention weights ``attn`` (N, heads, 3, 3) (kept for the
     backward pass)."""
-    n_rows = qkv2.shape[0]
-    w = qkv2.shape[1] // 3
-    d = w // heads
-    scale = np.float32(1.0 / np.sqrt(d))
+    n_rows, w, d, scale = _attention_sizes(tokens, heads)
     s = np.empty((3, 3), np.float32)
     for n in range(n_rows):
-        r0, r1, r2 = qkv0[idx0[n]], qkv1[idx1[n]], qkv2[n]
+        r0, r1, r2 = _token_rows(tokens, n)
         for hd in range(heads):
             o = hd * d
             ko, vo = w + o, 2 * w + o
@@ -142,28 +159,20 @@ def attention_forward(
 
 @njit(cache=True)
 def attention_backward(
-    qkv0: NDArray[np.float32],
-    idx0: NDArray[np.int64],
-    qkv1: NDArray[np.float32],
-    idx1: NDArray[np.int64],
-    qkv2: NDArray[np.float32],
+    tokens: Tokens,
     heads: int,
     attn: NDArray[np.float32],
     grad_out: NDArray[np.float32],
-    grad0: NDArray[np.float32],
-    grad1: NDArray[np.float32],
-    grad2: NDArray[np.float32],
+    grads: tuple[NDArray[np.float32], ...],
 ) -> None:
-    """Adds the gradients of the three tables to ``grad0``, ``grad1``, ``grad2`` (zeroed by the
-    caller; rows shared by several outputs accumulate in row order)."""
-    n_rows = qkv2.shape[0]
-    w = qkv2.shape[1] // 3
-    d = w // heads
-    scale = np.float32(1.0 / np.sqrt(d))
+    """Adds the gradients of the three tables, ``grads`` = those of (qkv0, qkv1, qkv2) (zeroed
+    by the caller; rows shared by several outputs accumulate in row order)."""
+    n_rows, w, d, scale = _attention_sizes(tokens, heads)
+    grad_tokens = (grads[0], tokens[1], grads[1], tokens[3], grads[2])
     ds = np.empty((3, 3), np.float32)
     for n in range(n_rows):
-        r0, r1, r2 = qkv0[idx0[n]], qkv1[idx1[n]], qkv2[n]
-        g0, g1, g2 = grad0[idx0[n]], grad1[idx1[n]], grad2[n]
+        r0, r1, r2 = _token_rows(tokens, n)
+        g0, g1, g2 = _token_rows(grad_tokens, n)
         for hd in range(heads):
             o = hd * d
             ko, vo = w + o, 2 * w + o

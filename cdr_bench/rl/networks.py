@@ -190,8 +190,8 @@ class ThreeTokenAttention(torch.autograd.Function):
         n, w = qkv2.shape[0], qkv2.shape[1] // 3
         out = np.empty((n, w), np.float32)
         attn = np.empty((n, heads, 3, 3), np.float32)
-        arrays = [x.detach().numpy() for x in (qkv0, qkv1, qkv2)]
-        kernels.attention_forward(arrays[0], idx0, arrays[1], idx1, arrays[2], heads, out, attn)
+        q0, q1, q2 = (x.detach().numpy() for x in (qkv0, qkv1, qkv2))
+        kernels.attention_forward((q0, idx0, q1, idx1, q2), heads, out, attn)
         ctx.save_for_backward(qkv0, qkv1, qkv2)
         ctx.extra = (idx0, idx1, heads, attn)
         return torch.from_numpy(out)
@@ -199,12 +199,10 @@ class ThreeTokenAttention(torch.autograd.Function):
     @staticmethod
     def backward(ctx: Any, grad_out: torch.Tensor):  # type: ignore[override]
         idx0, idx1, heads, attn = ctx.extra
-        arrays = [x.detach().numpy() for x in ctx.saved_tensors]
-        grads = [np.zeros_like(a) for a in arrays]
+        q0, q1, q2 = (x.detach().numpy() for x in ctx.saved_tensors)
+        grads = (np.zeros_like(q0), np.zeros_like(q1), np.zeros_like(q2))
         g = grad_out.contiguous().numpy()
-        kernels.attention_backward(
-            arrays[0], idx0, arrays[1], idx1, arrays[2], heads, attn, g, *grads
-        )
+        kernels.attention_backward((q0, idx0, q1, idx1, q2), heads, attn, g, grads)
         g0, g1, g2 = (torch.from_numpy(x) for x in grads)
         return g0, None, g1, None, g2, None
 
@@ -229,7 +227,7 @@ def three_token_attention(
     q0, q1, q2 = (x.detach().contiguous().numpy() for x in tables)
     out = np.empty((q2.shape[0], q2.shape[1] // 3), np.float32)
     attn = np.empty((q2.shape[0], heads, 3, 3), np.float32)
-    kernels.attention_forward(q0, idx0, q1, idx1, q2, heads, out, attn)
+    kernels.attention_forward((q0, idx0, q1, idx1, q2), heads, out, attn)
     return torch.from_numpy(out)
 
 
