@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -14,15 +15,11 @@ from cdr_bench.evaluate.seeds import SPLITS, VALIDATION
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser(
+    p = add_command(
+        sub,
         "evaluate",
-        help="score an agent on identical episodes (default: the paper suite)",
-        description="Score an agent file (or folder with agent.py) on the paper's metrics. "
-        "Default: the paper suite (low, medium, high and the tactical scenarios, 1000 episodes "
-        "each). Writes a result JSON and a per-episode JSONL beside it. The reference agents "
-        "direct, mvp and random are shipped in the package and named without a path "
-        "(`cdr-bench evaluate mvp --scenario high`): the repository's agents/<name>/agent.py, "
-        "with the same identity hash.",
+        _evaluate,
+        "score an agent on identical episodes (default: the paper suite)",
     )
     p.add_argument(
         "agent",
@@ -73,29 +70,36 @@ def register(sub: Any) -> None:
     )
     add_agent_args(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=_evaluate)
 
-    c = sub.add_parser("compare", help="paired comparison of two results on the same episodes")
+    c = add_command(
+        sub, "compare", _compare, "paired comparison of two results on the same episodes"
+    )
     c.add_argument("result_a")
     c.add_argument("result_b")
     _add_scenarios_arg(
         c, "compare on these scenarios only (repeatable; default: every scenario both hold)"
     )
     c.add_argument("--json", default=None, help="also write the comparison as JSON here")
-    c.set_defaults(func=_compare)
 
-    r = sub.add_parser(
+    r = add_command(
+        sub,
         "report",
-        help="Markdown table of result files (every metric and role, 95 %% intervals)",
-        description="One Markdown table over result JSON files (one row per agent, scenario "
-        "and aircraft role, every metric with its 95 % interval), rendered by "
-        "cdr_bench.evaluate.report with the column list and number formats of every results "
-        "table. The tables in the repository's docs are rendered by `cdr-bench leaderboard "
-        "build` / `render-docs`.",
+        _report,
+        "Markdown table of result files (every metric and role, 95 %% intervals)",
     )
     r.add_argument("results", nargs="+", help="result JSON files")
     r.add_argument("--out", default=None, help="write here instead of printing")
-    r.set_defaults(func=_report)
+
+
+def add_command(
+    sub: Any, name: str, func: Callable[[argparse.Namespace], int], help: str
+) -> argparse.ArgumentParser:
+    """The subcommand ``name`` of the subparsers ``sub``, run as ``func(args)`` (its exit code):
+    ``help`` is its line in the parent's list, ``func``'s docstring (if any) the description its
+    ``--help`` shows (re-wrapped by argparse)."""
+    p = sub.add_parser(name, help=help, description=func.__doc__)
+    p.set_defaults(func=func)
+    return p
 
 
 def _add_scenarios_arg(p: argparse.ArgumentParser, help: str) -> None:
@@ -217,6 +221,11 @@ def base_seed_of(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    """Score an agent file (or folder with agent.py) on the paper's metrics. Default: the paper
+    suite (low, medium, high and the tactical scenarios, 1000 episodes each). Writes a result JSON
+    and a per-episode JSONL beside it. The reference agents direct, mvp and random are shipped in
+    the package and named without a path (`cdr-bench evaluate mvp --scenario high`): the
+    repository's agents/<name>/agent.py, with the same identity hash."""
     from cdr_bench.evaluate.api import default_out, evaluate, resolve_jobs
     from cdr_bench.evaluate.report import summary_text
     from cdr_bench.evaluate.results import check_output_path, episodes_path
@@ -268,6 +277,10 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
+    """One Markdown table over result JSON files (one row per agent, scenario and aircraft role,
+    every metric with its 95 % interval), rendered by cdr_bench.evaluate.report with the column list
+    and number formats of every results table. The tables in the repository's docs are rendered by
+    `cdr-bench leaderboard build` / `render-docs`."""
     from cdr_bench.evaluate.report import report_markdown
     from cdr_bench.evaluate.results import atomic_write_text, check_output_path, read_result
 

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from cdr_bench.checks import MAX_SEED, ranged
-from cdr_bench.evaluate.cli import add_episodes_arg, add_workers_arg
+from cdr_bench.evaluate.cli import add_command, add_episodes_arg, add_workers_arg
 from cdr_bench.evaluate.sandbox import Limits
 
 MAX_CPU_S = 30 * 86400
@@ -22,16 +22,11 @@ def register(sub: Any) -> None:
     lb = sub.add_parser("leaderboard", help="build or check the leaderboard (leaderboard/)")
     lb_sub = lb.add_subparsers(dest="leaderboard_cmd", required=True)
     defaults = Limits()
-    b = lb_sub.add_parser(
+    b = add_command(
+        lb_sub,
         "build",
-        help="render the leaderboard from result files; --evaluate re-runs submissions first",
-        description="Render leaderboard/README.md, index.html, leaderboard.json and plots/ from "
-        "the submissions and the result files in leaderboard/results, then the results tables "
-        "in the marked blocks of the repository's docs (as render-docs). With --evaluate, first "
-        "score every submission (or the named ones) in its own sandboxed process. With --check, "
-        "replay every committed episode from its recorded decisions, ask each entry's agent again "
-        "on a random sample of them, and fail (exit code 1, with a diff) if a record, the "
-        "agreement, the committed leaderboard or a docs block differs.",
+        _build,
+        "render the leaderboard from result files; --evaluate re-runs submissions first",
     )
     _add_dir(b)
     b.add_argument(
@@ -108,17 +103,12 @@ def register(sub: Any) -> None:
         default=None,
         help="entry the others are compared with on paired episodes (diffusion-ac)",
     )
-    b.set_defaults(func=_build)
 
-    d = lb_sub.add_parser(
+    d = add_command(
+        lb_sub,
         "render-docs",
-        help="rewrite the results tables in the docs' marked blocks from leaderboard/results",
-        description="Rewrite every marked block (<!-- name:start --> ... <!-- name:end -->) of "
-        "README.md, agents/BASELINES.md and agents/diffusion_ac/README.md from the committed "
-        "files: leaderboard/results, leaderboard/published and the agents' training and "
-        "latency logs (what each block shows: cdr_bench/leaderboard/tables.py; rendered by "
-        "cdr_bench/evaluate/report.py). Reads result files only; `build` "
-        "does this too.",
+        _render_docs,
+        "rewrite the results tables in the docs' marked blocks from leaderboard/results",
     )
     _add_dir(d)
     d.add_argument(
@@ -126,22 +116,14 @@ def register(sub: Any) -> None:
         action="store_true",
         help="write nothing; exit code 1 and a diff if a block differs from what the files give",
     )
-    d.set_defaults(func=_render_docs)
     _add_headroom(lb_sub)
 
 
 HEADROOM_HELP = "plan the ranking's episodes with a planner that knows the traffic (unranked row)"
-HEADROOM_DESCRIPTION = (
-    "Fly every episode of the ranking's headline scenario (the committed entries' episodes: "
-    "their base seed and count) with the clairvoyant planner of cdr_bench/evaluate/headroom.py "
-    "and write leaderboard/headroom/<scenario>.json and its log: the unranked headroom row of "
-    "the leaderboard (re-render with `build`). The planner knows the traffic's future, so it is "
-    "not an agent and is never ranked; `build --check` replays its recorded decisions."
-)
 
 
 def _add_headroom(lb_sub: Any) -> None:
-    h = lb_sub.add_parser("headroom", help=HEADROOM_HELP, description=HEADROOM_DESCRIPTION)
+    h = add_command(lb_sub, "headroom", _headroom, HEADROOM_HELP)
     _add_dir(h)
     h.add_argument(
         "--reference",
@@ -149,10 +131,14 @@ def _add_headroom(lb_sub: Any) -> None:
         help="the entry whose committed episodes are planned (default: mvp; every entry is "
         "scored on the same episodes)",
     )
-    h.set_defaults(func=_headroom)
 
 
 def _headroom(args: argparse.Namespace) -> int:
+    """Fly every episode of the ranking's headline scenario (the committed entries' episodes: their
+    base seed and count) with the clairvoyant planner of cdr_bench/evaluate/headroom.py and write
+    leaderboard/headroom/<scenario>.json and its log: the unranked headroom row of the leaderboard
+    (re-render with `build`). The planner knows the traffic's future, so it is not an agent and is
+    never ranked; `build --check` replays its recorded decisions."""
     import sys
 
     from cdr_bench.errors import UserError
@@ -211,6 +197,13 @@ def _leaderboard_dir(args: argparse.Namespace) -> Path:
 
 
 def _build(args: argparse.Namespace) -> int:
+    """Render leaderboard/README.md, index.html, leaderboard.json and plots/ from the submissions
+    and the result files in leaderboard/results, then the results tables in the marked blocks of
+    the repository's docs (as render-docs). With --evaluate, first score every submission (or the
+    named ones) in its own sandboxed process. With --check, replay every committed episode from
+    its recorded decisions, ask each entry's agent again on a random sample of them, and fail
+    (exit code 1, with a diff) if a record, the agreement, the committed leaderboard or a docs
+    block differs."""
     from cdr_bench.errors import UserError
     from cdr_bench.leaderboard.build import Options, run
     from cdr_bench.leaderboard.data import DEFAULT_REFERENCE
@@ -284,4 +277,9 @@ def _docs(lb_dir: Path, check: bool) -> int:
 
 
 def _render_docs(args: argparse.Namespace) -> int:
+    """Rewrite every marked block (<!-- name:start --> ... <!-- name:end -->) of README.md,
+    agents/BASELINES.md and agents/diffusion_ac/README.md from the committed files:
+    leaderboard/results, leaderboard/published and the agents' training and latency logs (what each
+    block shows: cdr_bench/leaderboard/tables.py; rendered by cdr_bench/evaluate/report.py). Reads
+    result files only; `build` does this too."""
     return _docs(_leaderboard_dir(args), args.check)

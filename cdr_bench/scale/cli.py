@@ -8,20 +8,15 @@ from typing import Any
 
 import cdr_bench.scale.ray_eval  # noqa: F401  (registers the evaluator's "ray" backend)
 from cdr_bench.checks import ranged
-from cdr_bench.evaluate.cli import add_episodes_arg
+from cdr_bench.evaluate.cli import add_command, add_episodes_arg
 
 MAX_TOTAL_STEPS = 10**10
 """Largest ``--total-steps`` of a sweep (the longest shipped recipe trains 3e6 steps)."""
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "sweep",
-        help="train and evaluate a grid of settings x seeds on Ray (sweeps/*.yaml)",
-        description="Run a sweep file: each trial trains with `cdr-bench train` and is scored "
-        "with `cdr-bench evaluate`; one folder per trial (named by a hash of its settings) "
-        "holding the run, trial.json and result.json/.jsonl.xz. Runs on a local Ray started on "
-        "demand, or on a cluster with --address.",
+    p = add_command(
+        sub, "sweep", _sweep, "train and evaluate a grid of settings x seeds on Ray (sweeps/*.yaml)"
     )
     p.add_argument("sweep", help="sweep YAML file")
     p.add_argument("--out", default=None, help="output folder (runs/sweeps/<name>)")
@@ -65,19 +60,23 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--dry-run", action="store_true", help="list the trials, run nothing")
     p.add_argument("--quiet", action="store_true", help="no per-trial lines")
-    p.set_defaults(func=_sweep)
 
-    q = sub.add_parser(
+    q = add_command(
+        sub,
         "sweep-plot",
-        help="sensitivity panels (success, NMAC rate, latency, reward) of a finished sweep",
+        _plot,
+        "sensitivity panels (success, NMAC rate, latency, reward) of a finished sweep",
     )
     q.add_argument("sweep_dir", help="output folder of `cdr-bench sweep`")
     q.add_argument("--out", default=None, help="PNG path (<sweep_dir>/sensitivity.png)")
     q.add_argument("--json", default=None, help="also write the plotted numbers here")
-    q.set_defaults(func=_plot)
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    """Run a sweep file: each trial trains with `cdr-bench train` and is scored with `cdr-bench
+    evaluate`; one folder per trial (named by a hash of its settings) holding the run, trial.json
+    and result.json/.jsonl.xz. Runs on a local Ray started on demand, or on a cluster with
+    --address."""
     import yaml
 
     from cdr_bench.errors import UserError
