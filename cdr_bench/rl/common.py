@@ -5,7 +5,8 @@ Pure numpy (no torch, no SB3): the trainer modules import this at module level, 
 
 * :class:`TrainArgs` -- the flags of every trainer, CleanRL style: one dataclass field per flag,
   the docstring under it is the help (:func:`add_arguments`, :func:`from_namespace`); those of
-  every run, whatever its algorithm (also IPPO/MAPPO's), are its base :class:`RunArgs`;
+  every run, whatever its algorithm (also IPPO/MAPPO's), are its base :class:`RunArgs`; those
+  of the PPO update, for the trainers that run it, :class:`PPOArgs`;
 * :func:`training_env` -- the :class:`~cdr_bench.rl.curriculum.CurriculumEnv` the flags describe;
 * :class:`RunLog` -- the run directory's ``args.json`` and ``log.jsonl``, the progress bar, the
   wall-time limit and the learning curve. Log keys have fixed prefixes: ``charts/`` (rollout
@@ -71,6 +72,24 @@ class RunArgs:
     and the simulator single-threaded, so more threads mostly contend)"""
     resume: bool = False
     """continue exactly from the state saved in run_dir"""
+
+
+@dataclass
+class PPOArgs:
+    """The flags of the PPO update, declared once for the trainers that run it (PPO and
+    MaskablePPO of :mod:`cdr_bench.rl.train_sb3`, IPPO/MAPPO): their Args list it as the first
+    base, redeclaring a default or help that differs."""
+
+    n_steps: int = 128
+    """PPO: rollout length per sub-environment"""
+    n_epochs: int = 10
+    """PPO: passes over each rollout"""
+    clip_range: float = 0.2
+    """PPO: clip of the probability ratio"""
+    gae_lambda: float = 0.95
+    """PPO: GAE lambda"""
+    ent_coef: float = 0.0
+    """PPO: entropy bonus coefficient"""
 
 
 @dataclass

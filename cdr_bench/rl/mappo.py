@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from cdr_bench.rl import common
-from cdr_bench.rl.common import OUTCOME_CHARTS, RunArgs, from_namespace
+from cdr_bench.rl.common import OUTCOME_CHARTS, PPOArgs, RunArgs, from_namespace
 
 # torch is imported inside run(): building the cdr-bench parser must not import it.
 
@@ -52,13 +52,11 @@ NAMES = ("ippo", "mappo")
 
 
 @dataclass
-class Args(RunArgs):
+class Args(PPOArgs, RunArgs):
     run_dir: str = "runs/mappo"
     """directory for args.json, log.jsonl and checkpoint.pt"""
     total_steps: int = 2_500_000
     """budget in aircraft transitions (one flying aircraft, one step)"""
-    threads: int = 1
-    """torch intra-op threads"""
     resume: bool = False
     """not supported by this trainer (a run always starts afresh); kept for the train command's
     common checks"""
@@ -67,21 +65,15 @@ class Args(RunArgs):
     n_envs: int = 16
     """parallel episodes in the batched simulator"""
     n_steps: int = 32
-    """environment steps per rollout (each gives up to n_envs x controlled aircraft rows)"""
+    """PPO: environment steps per rollout (each gives up to n_envs x controlled aircraft rows)"""
     n_epochs: int = 4
-    """passes over each rollout"""
     minibatches: int = 16
     """minibatches per pass"""
     lr: float = 1e-3
     """Adam step size (actor and critic), annealed linearly to 0"""
     gamma: float = 0.99
     """discount"""
-    gae_lambda: float = 0.95
-    """GAE lambda"""
-    clip_range: float = 0.2
-    """PPO ratio clip"""
     ent_coef: float = 0.01
-    """entropy bonus"""
     vf_coef: float = 0.5
     """value-loss weight"""
     max_grad_norm: float = 0.5

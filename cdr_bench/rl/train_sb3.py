@@ -34,6 +34,7 @@ import numpy as np
 from cdr_bench.errors import UserError
 from cdr_bench.rl import common
 from cdr_bench.rl.common import (
+    PPOArgs,
     RunLog,
     from_namespace,
     quick_evaluation,
@@ -50,9 +51,9 @@ TITLES = {"ppo": "PPO", "maskable-ppo": "MaskablePPO", "td3": "TD3"}
 
 
 @dataclass
-class Args(OffPolicyArgs):
+class Args(PPOArgs, OffPolicyArgs):
     """The replay flags (``buffer_size`` .. ``polyak``) are TD3's; PPO and MaskablePPO ignore
-    them."""
+    them, and TD3 those of :class:`~cdr_bench.rl.common.PPOArgs`."""
 
     run_dir: str = "runs/sb3"
     n_envs: int = 16
@@ -62,18 +63,8 @@ class Args(OffPolicyArgs):
     """Adam step size (TD3: actor and critic)"""
     action_noise: float = 0.1
     """TD3: std of the Gaussian exploration noise on the [-1, 1] outputs"""
-    n_steps: int = 128
-    """PPO: rollout length per sub-environment"""
     ppo_batch_size: int = 256
     """PPO: minibatch size"""
-    n_epochs: int = 10
-    """PPO: epochs per rollout"""
-    clip_range: float = 0.2
-    """PPO: clip ratio"""
-    gae_lambda: float = 0.95
-    """PPO: GAE lambda"""
-    ent_coef: float = 0.0
-    """PPO: entropy bonus coefficient"""
     teacher: str = ""
     """PPO, MaskablePPO: an agent (folder or file of the agent protocol, e.g. agents/mvp) whose
     demonstrations the policy and value head are fitted to before RL starts (imitation, then
@@ -110,7 +101,7 @@ def _new_model(algorithm: str, args: Args, venv: Any, device: Any = "cpu") -> An
     common = dict(gamma=args.gamma, learning_rate=args.lr, seed=args.seed, device=device, verbose=0)
     if algorithm in ("ppo", "maskable-ppo"):
         arch = dict(pi=[args.width] * 3, vf=[args.width] * 3)
-        ppo = same_named(args, ("n_steps", "n_epochs", "clip_range", "gae_lambda", "ent_coef"))
+        ppo = same_named(args, PPOArgs)
         kwargs = dict(batch_size=args.ppo_batch_size, policy_kwargs=dict(net_arch=arch), **ppo)
         return cls("MlpPolicy", venv, **kwargs, **common)
     from stable_baselines3.common.noise import NormalActionNoise, VectorizedActionNoise
