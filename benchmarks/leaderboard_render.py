@@ -5,7 +5,8 @@ measured in the same run.
 Each measurement is a fresh process that imports the package of one checkout and calls
 ``render_all`` on that checkout's own ``leaderboard/`` (submissions, result files, the landed
 Fig. 7 trials), writing nothing; the current checkout's pages are compared byte for byte with
-its committed ones (every plot drawn, as ``--check`` does; ``plots/manifest.json``, the record
+its committed ones (every plot drawn, as ``--check`` does on a machine that has not drawn them
+before: no plot cache; ``plots/manifest.json``, the record
 of what the plots were drawn from, is not compared), so a speed-up that changed a page would
 fail here. Rounds alternate current and reference; the table gives the median seconds and the
 median of the per-round ratios reference/current (above 1: the current checkout is faster).
@@ -34,6 +35,7 @@ from _checkout import PROBE_PRELUDE, probe_main  # noqa: E402
 _PROBE = (
     PROBE_PRELUDE
     + """
+import os; os.environ['CDR_BENCH_PLOT_CACHE'] = ''  # every plot drawn
 from cdr_bench.leaderboard.build import render_all
 lb = code / 'leaderboard'
 t0 = time.perf_counter()

@@ -1,11 +1,17 @@
 """One thread per library in every test process and in what it starts (the environment is
 inherited): pytest-xdist runs one test process per core, and a library that starts a thread per
 core in each of them (PyTorch's and OpenBLAS's pools) oversubscribes the machine; a test that
-needs another setting sets it."""
+needs another setting sets it.
+
+One folder of drawn leaderboard plots per test run (``CDR_BENCH_PLOT_CACHE``, shared by the test
+processes and what they start, removed at the end), not the user's: the tests run dozens of
+leaderboard builds of the same miniature leaderboard, and each drew the same plots again."""
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from typing import Any
 
 for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -13,6 +19,7 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 
 import pytest  # noqa: E402 - after the thread settings, before numpy loads
 
+from cdr_bench.leaderboard.plots import PLOT_CACHE_ENV  # noqa: E402
 from cdr_bench.scenarios import ScenarioConfig, load_scenario  # noqa: E402
 
 
@@ -31,3 +38,23 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """Long tests (``@pytest.mark.slow``) first, so that with one process per core
     (pytest-xdist) they do not start last and leave the other cores idle at the end."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The run's plot folder (module docstring), made by the process that starts the test
+    processes (they inherit its environment)."""
+    if "PYTEST_XDIST_WORKER" in os.environ or PLOT_CACHE_ENV in os.environ:
+        return
+    folder = tempfile.mkdtemp(prefix="cdr-bench-plots-")
+    os.environ[PLOT_CACHE_ENV] = folder
+    config.stash[_PLOTS] = folder
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    folder = config.stash.get(_PLOTS, None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(PLOT_CACHE_ENV, None)
+
+
+_PLOTS = pytest.StashKey[str]()

@@ -272,11 +272,17 @@ def jsonl_text(rows: Iterable[dict[str, Any]]) -> str:
     return "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
 
 
+def user_cache_dir(name: str) -> Path:
+    """The folder ``name`` of cdr-bench's cache in the user's cache folder:
+    ``$XDG_CACHE_HOME/cdr-bench/<name>``, else ``~/.cache/cdr-bench/<name>`` (not created)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "cdr-bench" / name
+
+
 def resume_key_path(partial: Path) -> Path:
     """Where the secret key of the checkpoint ``partial`` lives (module docstring)."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     name = hashlib.sha256(str(partial.resolve()).encode()).hexdigest()[:40]
-    return Path(base) / "cdr-bench" / "resume-keys" / f"{name}.key"
+    return user_cache_dir("resume-keys") / f"{name}.key"
 
 
 def batch_mac(key: bytes, run_key: str, batch: dict[str, Any]) -> str:

@@ -33,7 +33,8 @@ count, the first episodes of each scenario (a multiple of the batch size, so eac
 exactly as it was). Pages byte for byte; PNGs (and the images inside ``index.html``) only when
 this machine's matplotlib is the version that rendered them, otherwise their data is still
 compared through ``leaderboard.json`` and a note says so; ``--check`` draws every plot (it never
-reuses a committed PNG) and does not compare ``plots/manifest.json`` (a record of what the
+reuses a committed PNG; one this machine has drawn before is read from its plot cache,
+:func:`.plots.plot_cache_dir`) and does not compare ``plots/manifest.json`` (a record of what the
 plots were drawn from, not an output). Latency is never re-measured by ``--check``: the
 tables' latency columns come from the committed result files (measured while each entry was
 scored), the latency claim from ``latency.json`` (one controlled run of

@@ -15,8 +15,16 @@ styles and titles it reads; :func:`plot_specs`). A plot is therefore a function 
 and numpy versions), and ``cdr-bench leaderboard build`` reuses the committed PNG of a plot whose
 digest is unchanged instead of drawing it again (:func:`render_plots` with ``reuse``): the
 digests and the PNGs' SHA-256 are recorded in ``plots/manifest.json`` (:data:`MANIFEST`,
-:func:`plots_manifest`). A reused PNG has the bytes a redraw gives; ``--check`` redraws every
-plot.
+:func:`plots_manifest`). A reused PNG has the bytes a redraw gives; ``--check`` never reuses a
+committed PNG: it redraws every plot.
+
+For the same reason a PNG this machine has drawn is kept in the user's cache folder, named by its
+digest (:func:`plot_cache_dir`: ``$XDG_CACHE_HOME/cdr-bench/plots``, else
+``~/.cache/cdr-bench/plots``; another folder, or none, with :data:`PLOT_CACHE_ENV`), and a plot
+of that digest is read from there instead of drawn: by builds and by ``--check`` alike. Unlike
+the committed PNGs, whoever submits an entry cannot write there (its agent runs confined), so
+what the check compares is still this machine's own drawing. The folder keeps the
+:data:`PLOT_CACHE_SIZE` newest PNGs.
 """
 
 from __future__ import annotations
@@ -25,6 +33,8 @@ import functools
 import hashlib
 import json
 import math
+import os
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +50,11 @@ from cdr_bench.render import figure_png
 DPI = 80
 MANIFEST = "manifest.json"
 """The plots folder's record of what each PNG was drawn from (:func:`plots_manifest`)."""
+PLOT_CACHE_ENV = "CDR_BENCH_PLOT_CACHE"
+"""Environment variable: the folder of this machine's drawn PNGs (empty: none, every plot is
+drawn); unset: :func:`plot_cache_dir`'s default."""
+PLOT_CACHE_SIZE = 512
+"""PNGs kept in that folder (the oldest go first)."""
 
 
 def _label(key: str) -> str:
@@ -646,6 +661,40 @@ def _draw(plot: Plot) -> bytes:
     return plot.draw(**plot.args)
 
 
+def plot_cache_dir() -> Path | None:
+    """The folder of the PNGs this machine has drawn, by digest (module docstring), or None."""
+    folder = os.environ.get(PLOT_CACHE_ENV)
+    if folder is not None:
+        return Path(folder) if folder else None
+    from cdr_bench.evaluate.results import user_cache_dir
+
+    return user_cache_dir("plots")
+
+
+def _cached(folder: Path, digest: str) -> bytes | None:
+    try:
+        return (folder / f"{digest}.png").read_bytes()
+    except OSError:
+        return None
+
+
+def _keep(folder: Path, digest: str, png: bytes) -> None:
+    """Store ``png`` as ``<digest>.png`` (whole or not at all: a temporary file renamed); the
+    oldest PNGs beyond :data:`PLOT_CACHE_SIZE` are removed. A folder that cannot be written is
+    no error: the plot is drawn again next time."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=folder)
+        with os.fdopen(fd, "wb") as f:
+            f.write(png)
+        os.replace(tmp, folder / f"{digest}.png")
+        kept = sorted(folder.glob("*.png"), key=lambda p: p.stat().st_mtime_ns)
+        for old in kept[: max(0, len(kept) - PLOT_CACHE_SIZE)]:
+            old.unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
 def read_manifest(folder: Path) -> dict[str, dict[str, str]]:
     """``file name -> {"input": digest, "png": sha256}`` of the plots folder's manifest; empty
     when it is missing or unreadable (every plot is then drawn)."""
@@ -683,13 +732,21 @@ def render_plots(
     headline plots first. With ``reuse`` (a plots folder with its :data:`MANIFEST`), a plot
     whose digest the manifest records, with the PNG there unchanged, is read instead of drawn:
     the same bytes, since a plot is a function of its digest. ``drawn``: appended the names of
-    the plots drawn."""
+    the plots drawn (or read from this machine's plot cache, :func:`plot_cache_dir`: the same
+    bytes again)."""
     specs = plot_specs(data)
     manifest = read_manifest(reuse) if reuse is not None else {}
     out: dict[str, bytes | None] = {
         p.name: None if reuse is None else _reused(p, reuse, manifest) for p in specs
     }
-    todo = [p for p in specs if out[p.name] is None]
+    fresh = [p for p in specs if out[p.name] is None]
+    cache = plot_cache_dir()
+    digests = {p.name: p.digest() for p in fresh} if cache is not None else {}
+    todo = []
+    for p in fresh:
+        out[p.name] = _cached(cache, digests[p.name]) if cache is not None else None
+        if out[p.name] is None:
+            todo.append(p)
     if todo:
         import matplotlib
 
@@ -698,9 +755,11 @@ def render_plots(
 
         with matplotlib.style.context("default"), matplotlib.rc_context({"svg.hashsalt": "cdr"}):
             for p in todo:
-                out[p.name] = _draw(p)
-                if drawn is not None:
-                    drawn.append(p.name)
+                png = out[p.name] = _draw(p)
+                if cache is not None:
+                    _keep(cache, digests[p.name], png)
+    if drawn is not None:
+        drawn += [p.name for p in fresh]
     return {k: v for k, v in out.items() if v is not None}
 
 

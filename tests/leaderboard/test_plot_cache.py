@@ -1,6 +1,7 @@
 """The leaderboard's plots are functions of their digests: a build keeps each committed PNG whose
 input (the part of the data it draws, the plotting code, the matplotlib version) is unchanged,
-with the bytes a redraw gives, and draws only the plots that show what changed."""
+with the bytes a redraw gives, and draws only the plots that show what changed; a plot this
+machine has drawn is read from its plot cache (by digest), also by ``--check``."""
 
 from __future__ import annotations
 
@@ -12,7 +13,13 @@ import pytest
 
 from cdr_bench.evaluate.report import COLUMNS
 from cdr_bench.leaderboard import plots
-from cdr_bench.leaderboard.plots import MANIFEST, plots_manifest, read_manifest, render_plots
+from cdr_bench.leaderboard.plots import (
+    MANIFEST,
+    PLOT_CACHE_ENV,
+    plots_manifest,
+    read_manifest,
+    render_plots,
+)
 
 
 def _metrics(v: float) -> dict[str, Any]:
@@ -70,9 +77,12 @@ def _commit(folder: Path, data: dict[str, Any], pngs: dict[str, bytes]) -> None:
     (folder / MANIFEST).write_bytes(plots_manifest(data, pngs))
 
 
-def test_a_kept_plot_has_the_bytes_of_a_redraw(tmp_path: Path) -> None:
+def test_a_kept_plot_has_the_bytes_of_a_redraw(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Real drawing (four plots): unchanged data draws nothing and gives the committed bytes;
     a changed learning curve redraws that plot only, and every PNG equals a full redraw."""
+    monkeypatch.setenv(PLOT_CACHE_ENV, "")  # every render draws
     data = _data(("tactical/head-on",))
     full = render_plots(data)
     assert list(full) == [
@@ -97,8 +107,10 @@ def test_a_kept_plot_has_the_bytes_of_a_redraw(tmp_path: Path) -> None:
 
 @pytest.fixture
 def counted(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """The plots drawn (drawing replaced by the digest, so that no matplotlib runs)."""
+    """The plots drawn (drawing replaced by the digest, so that no matplotlib runs; no plot
+    cache, which would keep these stand-ins)."""
     names: list[str] = []
+    monkeypatch.setenv(PLOT_CACHE_ENV, "")
 
     def draw(p: plots.Plot) -> bytes:
         names.append(p.name)
@@ -164,3 +176,39 @@ def test_a_changed_png_code_or_matplotlib_is_redrawn(
     (tmp_path / MANIFEST).write_text("{not json")
     assert read_manifest(tmp_path) == {}
     assert _redrawn(tmp_path, data, counted) == every
+
+
+def test_a_plot_is_drawn_once_per_machine(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Real drawing: the plot cache holds each PNG drawn under its digest, and a render (with or
+    without a committed folder to reuse, as ``--check``) reads it from there with the bytes a
+    drawing gives; a PNG of another input is drawn; an unwritable cache is no error."""
+    data = _data(("tactical/head-on",))
+    monkeypatch.setenv(PLOT_CACHE_ENV, "")
+    full = render_plots(data)
+    cache = tmp_path / "cache"
+    monkeypatch.setenv(PLOT_CACHE_ENV, str(cache))
+    assert render_plots(data) == full
+    specs = {p.name: p for p in plots.plot_specs(data)}
+    assert sorted(x.name for x in cache.iterdir()) == sorted(
+        f"{p.digest()}.png" for p in specs.values()
+    )
+    names: list[str] = []
+
+    def draw(p: plots.Plot) -> bytes:
+        names.append(p.name)
+        raise AssertionError("drawn although this machine has drawn it")
+
+    monkeypatch.setattr(plots, "_draw", draw)
+    drawn: list[str] = []
+    assert render_plots(data, drawn=drawn) == full and names == []
+    assert drawn == list(full)  # not reused from a committed folder: as drawn
+    changed = copy.deepcopy(data)
+    changed["learning_curves"][1]["series"][0][1][1] = 0.2
+    with pytest.raises(AssertionError, match="drawn although"):
+        render_plots(changed)
+    assert names == ["learning_curves.png"]
+
+    monkeypatch.undo()
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv(PLOT_CACHE_ENV, str(tmp_path / "file" / "cache"))  # cannot be made
+    assert render_plots(data) == full
