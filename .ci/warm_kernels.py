@@ -12,7 +12,12 @@ cache, and every confined re-run afterwards loads them. It changes no result: a 
 the compiled form of the package's own source, checked against that source by numba.
 
 CI runs it twice: as is, and with ``NUMBA_CPU_NAME=generic`` (numba keeps the entries of each
-CPU target apart), for the tests that run agents under another CPU's settings.
+CPU target apart), for the tests that run agents under another CPU's settings. The first run
+also compiles the trainers' kernels (``cdr_bench.rl.kernels``: a few hundred steps of
+Diffusion-AC and of Rainbow-DQN, which use all of them) and the bootstrap's
+(``cdr_bench.evaluate.metrics``): on a fresh clone the test processes and the training runs they
+start compiled them side by side, each its own copy (15-20 s of CPU each), before the first had
+written the cache.
 """
 
 from __future__ import annotations
@@ -67,11 +72,31 @@ def main() -> int:
 
     for name in ("mvp", "mvp-reciprocal"):
         replay_result(ROOT / "leaderboard" / "results" / f"{name}.json", first=1)
+    trainers = ""
+    if not os.environ.get("NUMBA_CPU_NAME"):  # trainers and intervals run on the host CPU only
+        warm_trainers()
+        trainers = ", of the trainers and of the bootstrap"
     print(
-        f"warm_kernels: the kernels of {len(seen)} agents and of the simulator compiled in "
-        f"{time.perf_counter() - t0:.0f} s"
+        f"warm_kernels: the kernels of {len(seen)} agents, of the simulator{trainers} compiled "
+        f"in {time.perf_counter() - t0:.0f} s"
     )
     return 0
+
+
+def warm_trainers() -> None:
+    import tempfile
+
+    from cdr_bench.cli import main as cdr_bench
+    from cdr_bench.evaluate.metrics import bootstrap_mean_interval, ratio_interval
+
+    bootstrap_mean_interval(np.arange(3.0))
+    ratio_interval(np.ones((3, 2)))
+    tiny = ["--total-steps", "200", "--n-envs", "4", "--eval-episodes", "0", "--no-progress"]
+    tiny += ["--width", "16", "--learning-starts", "64", "--batch-size", "16"]
+    with tempfile.TemporaryDirectory() as d:
+        for name in ("diffusion-ac", "rainbow"):
+            code = cdr_bench(["train", name, "--run-dir", f"{d}/{name}", *tiny])
+            assert code == 0, f"train {name} exited with {code}"
 
 
 if __name__ == "__main__":
