@@ -132,7 +132,7 @@ class Repo:
         self.lb_dir = Path(leaderboard_dir)
         self.root = self.lb_dir.resolve().parent
         self.results_dir = self.lb_dir / "results"
-        self._results: dict[str, dict[str, Any]] = {}
+        self._results: dict[tuple[str, bool], dict[str, Any]] = {}
         self._analysis: dict[tuple[str, str, tuple[str, ...]], Any] = {}
 
     @cached_property
@@ -152,32 +152,30 @@ class Repo:
         """The entry's display name as Markdown text (the blocks are Markdown tables)."""
         return md_text(self.submission(name).display_name)
 
-    def result(self, name: str) -> dict[str, Any]:
-        if name not in self._results:
+    def result(self, name: str, roles: bool = True) -> dict[str, Any]:
+        """The entry's result with its metrics; ``roles=False``: the system metrics only
+        (:func:`~cdr_bench.evaluate.results.read_result`)."""
+        if (name, roles) not in self._results:
             self.submission(name)
-            try:
-                self._results[name] = read_result(result_path(self.results_dir, name))
-            except ValueError as e:
-                raise UserError(
-                    f"{e}; run `cdr-bench leaderboard build --evaluate {name}`"
-                ) from None
-        return self._results[name]
+            self._results[name, roles] = self._read(name, name, roles)
+        return self._results[name, roles]
 
-    def seed_results(self, name: str) -> list[tuple[int | None, dict[str, Any]]]:
+    def _read(self, entry: str, run: str, roles: bool) -> dict[str, Any]:
+        try:
+            return read_result(result_path(self.results_dir, run), roles=roles)
+        except ValueError as e:
+            raise UserError(f"{e}; run `cdr-bench leaderboard build --evaluate {entry}`") from None
+
+    def seed_results(
+        self, name: str, roles: bool = True
+    ) -> list[tuple[int | None, dict[str, Any]]]:
         """``(seed, result)`` of every training seed of an entry, its ``checkpoint`` first
         (``results/<name>.json``), then the others (``results/<name>.seed-<k>.json``); one
-        ``(None, result)`` for an entry without seeds."""
+        ``(None, result)`` for an entry without seeds. ``roles`` as :meth:`result`."""
         sub = self.submission(name)
-        runs: list[tuple[int | None, dict[str, Any]]] = [(sub.seed, self.result(name))]
+        runs: list[tuple[int | None, dict[str, Any]]] = [(sub.seed, self.result(name, roles))]
         for view in sub.seed_views():
-            seed = int(view.name.rsplit("-", 1)[1])
-            try:
-                res = read_result(result_path(self.results_dir, view.name))
-            except ValueError as e:
-                raise UserError(
-                    f"{e}; run `cdr-bench leaderboard build --evaluate {name}`"
-                ) from None
-            runs.append((seed, res))
+            runs.append((int(view.name.rsplit("-", 1)[1]), self._read(name, view.name, roles)))
         return runs
 
     def paper_rows(self, name: str) -> list[PaperRow]:
@@ -476,13 +474,16 @@ def measured(
     )
 
 
-def seed_runs(repo: Repo, entries: Iterable[str]) -> list[tuple[str, dict[str, Any]]]:
+def seed_runs(
+    repo: Repo, entries: Iterable[str], roles: bool = True
+) -> list[tuple[str, dict[str, Any]]]:
     """``(label, result)`` of every training seed of each entry (the leaderboard's per-seed
-    result files; an entry without seeds is one run, labelled with its name alone)."""
+    result files; an entry without seeds is one run, labelled with its name alone); ``roles``
+    as :meth:`Repo.result`."""
     return [
         (repo.label(n) if seed is None else f"{repo.label(n)}, seed {seed}", res)
         for n in entries
-        for seed, res in repo.seed_results(n)
+        for seed, res in repo.seed_results(n, roles)
     ]
 
 
@@ -495,8 +496,8 @@ def measured_seeds(
 
 def system_seeds(repo: Repo, entries: Iterable[str]) -> str:
     """The system metrics of every training seed of each entry, one row per seed and
-    scenario."""
-    return system_table(seed_runs(repo, entries))
+    scenario (the per-role metrics, which it does not show, are not computed)."""
+    return system_table(seed_runs(repo, entries, roles=False))
 
 
 def multimodality(repo: Repo, entries: Iterable[str]) -> str:
