@@ -64,18 +64,37 @@ def _kill(p: subprocess.Popen) -> None:
     p.wait(timeout=30)
 
 
-def _wait_nodes(address: str, n: int, timeout_s: float = HANG_S) -> None:
-    code = (
-        "import ray,sys; ray.init(address=sys.argv[1], logging_level='ERROR'); "
-        "print(sum(x['Alive'] for x in ray.nodes()))"
-    )
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        r = subprocess.run([sys.executable, "-c", code, address], capture_output=True, text=True)
-        if r.returncode == 0 and r.stdout.strip().splitlines()[-1:] == [str(n)]:
-            return
+_WAIT_NODES = """
+import sys, time
+import ray
+address, n, deadline = sys.argv[1], int(sys.argv[2]), time.monotonic() + float(sys.argv[3])
+while True:
+    try:
+        ray.init(address=address, logging_level="ERROR")
+        break
+    except Exception:
+        if time.monotonic() > deadline:
+            sys.exit(1)
         time.sleep(1)
-    raise TimeoutError(f"{n} Ray nodes did not come up at {address}")
+while sum(x["Alive"] for x in ray.nodes()) != n:
+    if time.monotonic() > deadline:
+        sys.exit(1)
+    time.sleep(0.5)
+"""
+
+
+def _wait_nodes(address: str, n: int, timeout_s: float = HANG_S) -> None:
+    """Until ``n`` nodes of the cluster at ``address`` are alive: one process that connects
+    once the head answers and then asks for the nodes every half second (a process per try
+    imported Ray each time, a second or two of CPU)."""
+    r = subprocess.run(
+        [sys.executable, "-c", _WAIT_NODES, address, str(n), str(timeout_s)],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s + 60,
+    )
+    if r.returncode != 0:
+        raise TimeoutError(f"{n} Ray nodes did not come up at {address}:\n{r.stderr[-2000:]}")
 
 
 @pytest.fixture
