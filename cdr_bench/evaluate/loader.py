@@ -138,17 +138,29 @@ def reserved_module_names() -> frozenset[str]:
     """Top-level module names an agent's file may not take: the standard library's, the
     interpreter's built-in modules, every installed distribution's top-level packages, and
     ``cdr_bench``. A file ``json.py`` or ``numpy.py`` in a folder on some process's import path
-    would replace the real module for whatever imports it there. Computed once per process
-    (reading every distribution's file list takes ~0.6 s; the installed set does not change
-    while a build runs)."""
+    would replace the real module for whatever imports it there. An installed distribution's
+    top-level names are those its ``top_level.txt`` declares and every module or folder name
+    in the folder it is installed in (``site-packages``): a superset of what
+    ``importlib.metadata.packages_distributions`` infers from every distribution's file list,
+    which took 0.4-0.9 s at each start of a build. Computed once per process (the installed
+    set does not change while a build runs)."""
     from importlib import metadata
 
     names = set(sys.stdlib_module_names) | set(sys.builtin_module_names) | {"cdr_bench"}
+    folders = set()
     try:
-        names |= set(metadata.packages_distributions())
+        for dist in metadata.distributions():
+            names.update((dist.read_text("top_level.txt") or "").split())
+            folders.add(str(dist.locate_file("")))
     except Exception:  # noqa: BLE001 - a broken distribution's metadata: the rest still holds
         pass
-    return frozenset(names)
+    for folder in folders:
+        try:
+            entries = os.listdir(folder)
+        except OSError:
+            continue
+        names.update(e.split(".", 1)[0] for e in entries)
+    return frozenset(n for n in names if n.isidentifier())
 
 
 def check_module_names(agent: Path, files: list[Path], what: str) -> None:

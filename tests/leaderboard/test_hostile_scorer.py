@@ -171,6 +171,20 @@ def test_agent_module_shadowing_a_real_one_is_refused(tmp_path: Path, name: str)
     assert f"would shadow the module `{module}`" in r.stderr, r.stderr
 
 
+def test_reserved_names_cover_every_installed_top_level_module() -> None:
+    """What the installed distributions' file lists give (``packages_distributions``, the
+    slow way) is reserved, with the standard library, single-module distributions and
+    ``cdr_bench``; an agent's own names are not."""
+    from importlib import metadata
+
+    from cdr_bench.evaluate.loader import reserved_module_names
+
+    reserved = reserved_module_names()
+    assert {n for n in metadata.packages_distributions() if n.isidentifier()} <= reserved
+    assert {"json", "numpy", "torch", "yaml", "typing_extensions", "cdr_bench"} <= reserved
+    assert not {"agent", "policy", "utils", "weights"} & reserved
+
+
 # ----------------------------------------------------------------------------------------------
 # Probes inside the sandbox: an agent that reports what it saw through its load error
 
