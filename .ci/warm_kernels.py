@@ -11,13 +11,13 @@ also runs in-process), and asked for one batch of decisions: its kernels land in
 cache, and every confined re-run afterwards loads them. It changes no result: a cache entry is
 the compiled form of the package's own source, checked against that source by numba.
 
-CI runs it twice: as is, and with ``NUMBA_CPU_NAME=generic`` (numba keeps the entries of each
-CPU target apart), for the tests that run agents under another CPU's settings. The first run
-also compiles the trainers' kernels (``cdr_bench.rl.kernels``: a few hundred steps of
+It also compiles the trainers' kernels (``cdr_bench.rl.kernels``: a few hundred steps of
 Diffusion-AC and of Rainbow-DQN, which use all of them) and the bootstrap's
 (``cdr_bench.evaluate.metrics``): on a fresh clone the test processes and the training runs they
 start compiled them side by side, each its own copy (15-20 s of CPU each), before the first had
-written the cache.
+written the cache. For this machine's CPU only: run with ``NUMBA_CPU_NAME=generic`` it compiles
+the agents' and the simulator's for numba's generic CPU (never beside a run for another CPU:
+numba adds an entry to a kernel's cache index by reading the index and writing it back).
 """
 
 from __future__ import annotations

@@ -303,7 +303,7 @@ def run_both(tmp: Path) -> tuple[dict[str, Any], dict[str, Any]]:
         # The default child compiles its kernels afresh (a cache of its own) so that it can
         # inspect their assembly; the baseline child loads numba's generic-CPU entries from the
         # package's cache, or compiles them there (numba keeps each CPU target's entries apart,
-        # so it never loads the host CPU's code; CI compiles them before the tests).
+        # so it never loads the host CPU's code).
         env = {**base, **extra}
         if label == "default":
             env["NUMBA_CACHE_DIR"] = str(tmp / "numba-default")
