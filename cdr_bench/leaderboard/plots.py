@@ -685,9 +685,16 @@ def _keep(folder: Path, digest: str, png: bytes) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True, mode=0o700)
         fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=folder)
+    except OSError:
+        return
+    try:
         with os.fdopen(fd, "wb") as f:
             f.write(png)
         os.replace(tmp, folder / f"{digest}.png")
+    except OSError:
+        Path(tmp).unlink(missing_ok=True)  # a full disk: no partial file is left behind
+        return
+    try:
         kept = sorted(folder.glob("*.png"), key=lambda p: p.stat().st_mtime_ns)
         for old in kept[: max(0, len(kept) - PLOT_CACHE_SIZE)]:
             old.unlink(missing_ok=True)
