@@ -2,8 +2,9 @@
 # The built sdist and wheel work without the repository: build both, install the wheel (base
 # dependencies only) into a fresh venv outside the checkout and, from a folder outside it, list
 # the scenarios, evaluate the packaged reference agent `mvp` on 20 episodes of `high` and step
-# the PettingZoo environment once. Run from the dev environment (it needs the `build` package);
-# the builds and the install fetch from the package index.
+# the PettingZoo environment once. It needs only a Python with pip (the `build` package goes into
+# a venv of its own), so CI starts it before the dev environment is installed; the builds and the
+# installs fetch from the package index.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$PWD
@@ -13,14 +14,21 @@ tmp=$(mktemp -d "${TMPDIR:-/tmp}/cdr-bench-wheel.XXXXXX")
 trap 'rm -rf "$tmp"' EXIT
 case "$tmp/" in "$repo"/*) echo "wheel_smoke: $tmp is inside the checkout" >&2; exit 1 ;; esac
 
-# The sdist, then the wheel built from it (each in an isolated build environment).
-python -m build --outdir "$tmp/dist" . >"$tmp/build.log" 2>&1 || { cat "$tmp/build.log"; exit 1; }
+# The sdist, then the wheel built from it (each in an isolated build environment), from a copy
+# of the tracked files: the build writes its metadata into the tree it builds, and CI installs
+# the checkout itself at the same time.
+mkdir "$tmp/src"
+git ls-files -z | tar --null -T - -cf - | tar -xf - -C "$tmp/src"
+python3 -m venv "$tmp/build-venv"
+"$tmp/build-venv/bin/python" -m pip install -q build >"$tmp/build.log" 2>&1 \
+    && "$tmp/build-venv/bin/python" -m build --outdir "$tmp/dist" "$tmp/src" >>"$tmp/build.log" 2>&1 \
+    || { cat "$tmp/build.log"; exit 1; }
 sdist=$(ls "$tmp"/dist/cdr_bench-*.tar.gz)
 wheel=$(ls "$tmp"/dist/cdr_bench-*-py3-none-any.whl)
 
 # Every scenario of scenarios/ and the built-in agents are in the sdist (where they are in the
 # repository) and in the wheel (below cdr_bench/_data/, byte for byte); neither holds a link.
-python - "$sdist" "$wheel" <<'PY'
+python3 - "$sdist" "$wheel" <<'PY'
 import sys, tarfile, zipfile
 from pathlib import Path
 
@@ -42,8 +50,8 @@ PY
 say "built $(basename "$sdist") and $(basename "$wheel")"
 
 # A venv of its own (no pip inside: this pip installs into it; no byte-compiling: faster).
-python -m venv --without-pip "$tmp/venv"
-python -m pip --python "$tmp/venv/bin/python" install -q --no-compile "$wheel"
+python3 -m venv --without-pip "$tmp/venv"
+"$tmp/build-venv/bin/python" -m pip --python "$tmp/venv/bin/python" install -q --no-compile "$wheel"
 say "installed the wheel and its base dependencies"
 
 mkdir "$tmp/run"
