@@ -1,7 +1,7 @@
 """One thread per library in every test process and in what it starts (the environment is
-inherited): pytest-xdist runs a test process per core (and one more), and a library that starts a thread per
-core in each of them (PyTorch's and OpenBLAS's pools) oversubscribes the machine; a test that
-needs another setting sets it.
+inherited): pytest-xdist runs a test process per core (and one more), and a library that starts
+a thread per core in each of them (PyTorch's and OpenBLAS's pools) oversubscribes the machine; a
+test that needs another setting sets it.
 
 One folder of drawn leaderboard plots per test run (``CDR_BENCH_PLOT_CACHE``, shared by the test
 processes and what they start, removed at the end), not the user's: the tests run dozens of
