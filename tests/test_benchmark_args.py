@@ -55,6 +55,7 @@ WHOLE = "expected a whole number >= 1, got 0"
         ("latency", ("--episodes", "0"), f"argument --episodes: {WHOLE}"),
         ("latency", ("--entries", "nobody"), "--entries: no single-agent entry nobody"),
         ("latency", ("--json", "/dev/null"), "--json /dev/null"),
+        ("pytest_cpu", ("/nonexistent", "--top", "0"), f"argument --top: {WHOLE}"),
     ],
 )
 def test_bad_arguments_end_in_one_line(script: str, args: tuple[str, ...], message: str) -> None:
