@@ -11,7 +11,10 @@ Gymnasium (the environment names are then unavailable).
 
 from __future__ import annotations
 
-from typing import Any
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
 
 from cdr_bench import actions
 from cdr_bench.scenarios import ScenarioConfig, ScenarioError, list_scenarios, load_scenario
@@ -42,19 +45,46 @@ ends the episode there, as ``timeout``). An id's version is its scenario's ``ver
 their ``-v0`` stays the fixed encounter it always was (also ``HeadOnFixed-v0`` etc.), and
 Gymnasium says so when it is made. Multi-agent scenarios (``marl/*``) are PettingZoo tasks."""
 
-try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
-    # Bound eagerly: the function `env` must shadow the submodule `cdr_bench.env`.
+_ENV_NAMES = ("CDREnv", "env", "parallel_env")
+"""Bound on first use (:class:`_Package`): most processes that import this package never make
+an environment (a confined agent, a checkpoint check), and ``cdr_bench.env`` imports the
+simulator and numba, a third of the package's import time."""
+
+if TYPE_CHECKING:
     from cdr_bench.env import CDREnv, env, parallel_env
-except ImportError as _e:  # pragma: no cover - simulator-only interpreter
-    _missing = _e
 
-    def __getattr__(name: str) -> Any:
-        if name in ("CDREnv", "env", "parallel_env"):
-            raise ImportError(f"cdr_bench.{name} needs PettingZoo and Gymnasium: {_missing}")
-        raise AttributeError(f"module 'cdr_bench' has no attribute {name!r}")
-else:
+
+class _Package(types.ModuleType):
+    """This package's module: ``cdr_bench.env`` is the function, not the submodule.
+
+    Importing the submodule ``cdr_bench.env`` would bind it as this package's attribute ``env``
+    and hide the function; that binding is refused (the submodule stays in ``sys.modules``),
+    and the three names of :data:`_ENV_NAMES` are bound from it on first use."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "env" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+    def __getattr__(self, name: str) -> Any:
+        if name not in _ENV_NAMES:
+            raise AttributeError(f"module 'cdr_bench' has no attribute {name!r}")
+        try:  # the environment layer needs PettingZoo and Gymnasium; the simulator does not
+            module = importlib.import_module("cdr_bench.env")
+        except ImportError as e:
+            raise ImportError(f"cdr_bench.{name} needs PettingZoo and Gymnasium: {e}") from None
+        for n in _ENV_NAMES:
+            super().__setattr__(n, getattr(module, n))
+        return getattr(module, name)
+
+
+sys.modules[__name__].__class__ = _Package
+
+try:
     import gymnasium as _gym
-
+except ImportError:  # pragma: no cover - simulator-only interpreter
+    pass
+else:
     for _id, _kwargs, _steps in GYMNASIUM_TASKS:
         if _id not in _gym.registry:
             _gym.register(

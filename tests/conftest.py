@@ -5,7 +5,9 @@ test that needs another setting sets it.
 
 One folder of drawn leaderboard plots per test run (``CDR_BENCH_PLOT_CACHE``, shared by the test
 processes and what they start, removed at the end), not the user's: the tests run dozens of
-leaderboard builds of the same miniature leaderboard, and each drew the same plots again."""
+leaderboard builds of the same miniature leaderboard, and each drew the same plots again. Its
+``sb3-logs`` is ``SB3_LOGDIR``: Stable-Baselines3 makes a log folder (in ``/tmp`` unless told)
+for every model that trains without a logger of its own."""
 
 from __future__ import annotations
 
@@ -55,6 +57,7 @@ def pytest_configure(config: pytest.Config) -> None:
         return
     folder = tempfile.mkdtemp(prefix="cdr-bench-plots-")
     os.environ[PLOT_CACHE_ENV] = folder
+    os.environ.setdefault("SB3_LOGDIR", os.path.join(folder, "sb3-logs"))
     config.stash[_PLOTS] = folder
 
 

@@ -4,8 +4,10 @@ validates builds a simulator that resets and steps. Bounded to a few seconds."""
 
 from __future__ import annotations
 
+import atexit
 import copy
 import dataclasses
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,7 @@ FUZZ = settings(
 )
 
 _DIR = Path(tempfile.mkdtemp(prefix="cdr-bench-fuzz-"))
+atexit.register(shutil.rmtree, _DIR, ignore_errors=True)
 
 TOKENS = [
     "extends: ", "medium", "tactical/head-on", "../..", "_base", "\n", "  ", "- ", "{", "}",
