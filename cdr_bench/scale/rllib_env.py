@@ -55,7 +55,7 @@ class CDRMultiAgentEnv(MultiAgentEnv):
             )
             act_spaces[a] = self.par_env.action_space(a)
         self.possible_agents = list(names)
-        self.agents = []
+        self.agents: list[str] = []
         self.observation_spaces = {k: v for k, v in obs_spaces.items()}  # typed as RLlib declares
         self.action_spaces = {k: v for k, v in act_spaces.items()}
         # the old API stack reads single spaces of the whole env
