@@ -40,8 +40,9 @@ same action except on near ties (``tests/rl/test_fast_policy.py``), and the same
 different kernel settings standing in for different CPUs
 (``tests/leaderboard/test_cpu_independence.py``).
 
-Weights come in as the numpy arrays of a checkpoint's ``state_dict`` (torch reads the file,
-``weights_only=True``; this module imports neither torch nor :mod:`cdr_bench.rl`). Key names are
+Weights come in as the numpy arrays of a checkpoint's ``state_dict`` (read from the file by
+:mod:`cdr_bench.weights`, without torch, or by the agent with ``torch.load(weights_only=True)``;
+this module imports neither torch nor :mod:`cdr_bench.rl`). Key names are
 those of the shipped checkpoints (the modules in :mod:`cdr_bench.rl` that wrote them).
 
 Speed: kernels are compiled once (numba ``cache=True``) and warmed up when a policy is built, so
@@ -1172,7 +1173,7 @@ def new_generator(seed: int | None) -> np.random.Generator:
 
 class CheckpointActorAgent:
     """The agent protocol for a weights-only actor checkpoint of the trainers' layout
-    (``{"config": {...}, "state_dict": ...}`` read with ``torch.load(weights_only=True)``;
+    (``{"config": {...}, "state_dict": ...}``, read by :func:`cdr_bench.weights.load_weights`;
     Linear+Tanh layers, Linear -> 27 logits): the argmax of the masked logits on this module's
     fixed numeric path, for every aircraft on its own observation. An agent file subclasses it
     with ``algorithm`` (the ``config["algorithm"]`` it accepts) and ``default_checkpoint`` (the
@@ -1184,25 +1185,24 @@ class CheckpointActorAgent:
     algorithm: str = ""
     default_checkpoint: str = ""
     missing: str = ""
-    """Said after "no checkpoint at PATH" when the file does not exist (empty: torch's error)."""
+    """Said after "no checkpoint at PATH" when the file does not exist (empty: that alone)."""
 
     def __init__(self, observation_space: Any = None, action_space: Any = None,
                  checkpoint: str | None = None) -> None:  # fmt: skip
         import os
 
-        import torch
+        from cdr_bench.weights import load_weights
 
         self.checkpoint = (
             checkpoint or os.environ.get("CDR_BENCH_CHECKPOINT") or str(self.default_checkpoint)
         )
         if self.missing and not os.path.isfile(self.checkpoint):
             raise FileNotFoundError(f"no checkpoint at {self.checkpoint}: {self.missing}")
-        ck = torch.load(self.checkpoint, map_location="cpu", weights_only=True)
+        ck = load_weights(self.checkpoint)
         reason = self.refuse(ck["config"])
         if reason is not None:
             raise ValueError(f"{self.checkpoint}: {reason}")
-        state = {k: v.detach().cpu().numpy() for k, v in ck["state_dict"].items()}
-        self.net = MLP.from_state_dict(state, "", "tanh")
+        self.net = MLP.from_state_dict(dict(ck["state_dict"]), "", "tanh")
 
     def refuse(self, config: Mapping[str, Any]) -> str | None:
         """Why this checkpoint's ``config`` is not one this agent runs (None: it is)."""

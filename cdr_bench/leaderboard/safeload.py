@@ -1,8 +1,10 @@
 """``python -m cdr_bench.leaderboard.safeload CHECKPOINT``: open a checkpoint with a loader
 that cannot run code (run sandboxed before a submission is evaluated).
 
-* ``.pt`` / ``.pth``: ``torch.load(weights_only=True)`` (tensors, containers and plain values
-  only; anything else raises ``UnpicklingError``);
+* ``.pt`` / ``.pth``: :func:`cdr_bench.weights.read_checkpoint` (plain tensors in dicts, lists
+  and tuples, read without torch), else ``torch.load(weights_only=True)`` (tensors, containers
+  and plain values only; anything else raises ``UnpicklingError``): what the first reads, the
+  second reads too;
 * ``.npz``: ``numpy.load(allow_pickle=False)`` of every array;
 * ``.safetensors``: the JSON header is parsed and every tensor's byte range checked.
 
@@ -20,10 +22,16 @@ from pathlib import Path
 def check(path: Path) -> str:
     suffix = path.suffix
     if suffix in (".pt", ".pth"):
-        import torch
+        from cdr_bench.weights import UnsupportedCheckpoint, read_checkpoint
 
-        obj = torch.load(path, map_location="cpu", weights_only=True)
-        return f"{path.name}: torch weights-only load ok ({type(obj).__name__})"
+        try:
+            obj = read_checkpoint(path)
+            return f"{path.name}: weights-only read ok without torch ({type(obj).__name__})"
+        except UnsupportedCheckpoint:
+            import torch
+
+            obj = torch.load(path, map_location="cpu", weights_only=True)
+            return f"{path.name}: torch weights-only load ok ({type(obj).__name__})"
     if suffix == ".npz":
         import numpy as np
 

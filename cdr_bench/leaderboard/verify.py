@@ -191,36 +191,33 @@ def fresh_run(
     """``agent`` on ``episodes`` fresh episodes of ``scenario`` (base seed ``base_seed``, agent
     reset seeds derived with ``agent_key``): the count and rate of every headline-style metric
     the check compares (the ownship's ``clean_success_rate`` and ``success_rate``)."""
-    from cdr_bench.evaluate.metrics import scenario_metrics
-
     config = _scenario(scenario)
     records: list[dict[str, Any]] = []
     for k in range(-(-episodes // batch_size)):
         got = run_batch(agent, config, base_seed, k, batch_size, episodes, agent_key=agent_key)
         records += got["episodes"]
-    own = scenario_metrics(records)["ownship"]
     return {
         "scenario": scenario,
         "base_seed": base_seed,
         "episodes": episodes,
-        "metrics": {m: own[m] for m in FRESH_METRICS},
+        "metrics": ownship_metrics(records),
     }
 
 
-def committed_ownship(path: str | Path, scenario: str) -> dict[str, Any]:
-    """The ownship's metrics on ``scenario`` of a committed result (read from its per-episode
-    log; the other scenarios and roles are not computed)."""
-    from cdr_bench.evaluate.metrics import group_metrics, role_of
+def ownship_metrics(episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    """The :data:`FRESH_METRICS` of the ownship over these episode records (only those: the
+    other metrics, and their bootstrap intervals, are not computed)."""
+    from cdr_bench.evaluate.metrics import get_metric, role_of
 
+    own = [ac for ep in episodes for ac in ep["aircraft"] if role_of(ac["id"]) == "ownship"]
+    return {m: get_metric(m).compute(own) for m in FRESH_METRICS}
+
+
+def committed_ownship(path: str | Path, scenario: str) -> dict[str, Any]:
+    """The ownship's :data:`FRESH_METRICS` on ``scenario`` of a committed result (read from its
+    per-episode log)."""
     result = read_result(path, metrics=False)
-    records = [
-        ac
-        for ep in read_episodes(path, result)
-        if ep["scenario"] == scenario
-        for ac in ep["aircraft"]
-        if role_of(ac["id"]) == "ownship"
-    ]
-    return group_metrics(records)
+    return ownship_metrics([ep for ep in read_episodes(path, result) if ep["scenario"] == scenario])
 
 
 FRESH_METRICS = ("clean_success_rate",)
