@@ -18,10 +18,21 @@ start compiled them side by side, each its own copy (15-20 s of CPU each), befor
 written the cache. For this machine's CPU only: run with ``NUMBA_CPU_NAME=generic`` it compiles
 the agents' and the simulator's for numba's generic CPU (never beside a run for another CPU:
 numba adds an entry to a kernel's cache index by reading the index and writing it back).
+
+Having compiled the simulator's and the agents' kernels afresh (CI's clone has no cache), it
+reads their machine code for fused multiply-adds and libm calls (``tests/kernel_code.py``) and
+fails if it finds one; it prints ``machine code inspected`` when it has read all of them, and
+CI then tells the two tests that would compile them again for the same reading to skip it.
+Kernels loaded from the cache cannot be read: it says so, and the tests do it themselves.
+
+``--part agents`` compiles the agents' and the simulator's kernels only (they need the base
+dependencies and torch: CI runs it while the dev extra installs), ``--part trainers`` the
+trainers' and the bootstrap's.
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import os
 import sys
@@ -35,12 +46,56 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", choices=("agents", "trainers", "all"), default="all")
+    part = ap.parse_args().part
+    host = not os.environ.get("NUMBA_CPU_NAME")  # trainers and intervals: the host CPU only
+    t0 = time.perf_counter()
+    if part != "trainers":
+        n = warm_agents()
+        inspected = inspect() if host else "not inspected (another CPU's code)"
+        print(f"warm_kernels: the kernels of {n} agents and of the simulator compiled; {inspected}")
+    if part != "agents" and host:
+        warm_trainers()
+        print("warm_kernels: the trainers' and the bootstrap's kernels compiled")
+    print(f"warm_kernels: {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def inspect() -> str:
+    """Read the machine code of the simulator's and the inference path's kernels; exit 1 on a
+    fused multiply-add or a libm call."""
+    sys.path.insert(0, str(ROOT))
+    import cdr_bench.inference
+    from cdr_bench.sim import kernels
+    from tests.kernel_code import CachedCode, inspect_module
+
+    try:
+        found = {**inspect_module(kernels), **inspect_module(cdr_bench.inference)}
+    except CachedCode as e:
+        return f"not inspected (loaded from the cache: {e})"
+    bad = {k: v for k, v in found.items() if v}
+    if bad:
+        print("warm_kernels: in the machine code:", file=sys.stderr)
+        for k, v in bad.items():
+            print(f"  {k}: {', '.join(sorted(set(v)))}", file=sys.stderr)
+        raise SystemExit(1)
+    need = ("step_episodes", "observe_episodes", "reset_episodes", "accumulate_step")
+    missing = [f for f in need if not any(f"kernels.{f}(" in k for k in found)]
+    if missing or not any(k.startswith("cdr_bench.inference.") for k in found):
+        raise SystemExit(f"warm_kernels: not compiled here: {missing or 'cdr_bench.inference'}")
+    return (
+        f"machine code inspected: {len(found)} kernel signatures, no fused multiply-add, "
+        "no libm call"
+    )
+
+
+def warm_agents() -> int:
     from gymnasium import spaces
 
     from cdr_bench.scenarios import load_scenario
     from cdr_bench.vector_env import observation_space
 
-    t0 = time.perf_counter()
     obs_space = observation_space(load_scenario("high"))
     act_space = spaces.Discrete(27)
     width = obs_space["observation"].shape[0]
@@ -72,15 +127,7 @@ def main() -> int:
 
     for name in ("mvp", "mvp-reciprocal"):
         replay_result(ROOT / "leaderboard" / "results" / f"{name}.json", first=1)
-    trainers = ""
-    if not os.environ.get("NUMBA_CPU_NAME"):  # trainers and intervals run on the host CPU only
-        warm_trainers()
-        trainers = ", of the trainers and of the bootstrap"
-    print(
-        f"warm_kernels: the kernels of {len(seen)} agents, of the simulator{trainers} compiled "
-        f"in {time.perf_counter() - t0:.0f} s"
-    )
-    return 0
+    return len(seen)
 
 
 def warm_trainers() -> None:
