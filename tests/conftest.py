@@ -37,9 +37,27 @@ def config_factory():
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Long tests (``@pytest.mark.slow``) first, so that with one process per core
-    (pytest-xdist) they do not start last and leave the other cores idle at the end."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """Long tests (``@pytest.mark.slow``) first in every test process, so that none starts
+    last and leaves the other cores idle at the end.
+
+    pytest-xdist's ``worksteal`` hands each of the W processes one contiguous part of this list
+    (sizes n // W, then what is left // (W - 1), ...), and a process that runs out takes the
+    second half of the longest queue. With the long tests all at the head of the list, they
+    were all in the first process's part, one after the other, and the last of them ran alone
+    at the end (measured: the Ray sweep tests from 234 to 326 s of a 344 s run). So the long
+    tests are dealt round-robin to the parts, each part starting with its share."""
+    slow = [i for i in items if i.get_closest_marker("slow") is not None]
+    rest = [i for i in items if i.get_closest_marker("slow") is None]
+    w = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    out, left, taken = [], len(items), 0
+    for k in range(w):
+        size = left // (w - k)
+        left -= size
+        head = slow[k::w]
+        more = max(0, size - len(head))
+        out += head + rest[taken : taken + more]
+        taken += more
+    items[:] = out + rest[taken:]
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:

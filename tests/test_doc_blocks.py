@@ -245,7 +245,18 @@ def run_bash(text: str, cwd: Path) -> str:
     return r.stdout
 
 
-@pytest.mark.parametrize("block", RUN, ids=[f"{b.id}-{b.lang}" for b in RUN])
+def _trains(b: Block) -> bool:
+    """A block that trains or starts Ray: tens of seconds (tests/conftest.py starts them early)."""
+    return b.lang == "bash" and any(
+        k in b.text for k in ("cdr-bench train", "--total-timesteps", "rllib_ppo.py")
+    )
+
+
+@pytest.mark.parametrize(
+    "block",
+    [pytest.param(b, marks=pytest.mark.slow) if _trains(b) else b for b in RUN],
+    ids=[f"{b.id}-{b.lang}" for b in RUN],
+)
 def test_block_runs_as_printed(block: Block, scratch: Path, monkeypatch: pytest.MonkeyPatch):
     monkeypatch.chdir(scratch)
     if block.include:

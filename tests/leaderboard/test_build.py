@@ -248,6 +248,7 @@ def test_misbehaving_submission_leaves_leaderboard_untouched(repo: Path, kind: s
     assert not list(lb.glob(".build-*")), "scratch folder left behind"
 
 
+@pytest.mark.slow
 def test_adding_a_submission_is_one_yaml_file(repo: Path) -> None:
     lb = repo / "leaderboard"
     (lb / "submissions" / "direct-again.yaml").write_text(

@@ -72,6 +72,7 @@ def test_multi_agent_entries_are_ranked_apart_on_clean_flights(marl_repo: Path) 
     assert 'id="multi-agent"' in html and 'id="table-multi-agent"' in html
 
 
+@pytest.mark.slow
 def test_check_replays_and_reruns_the_multi_agent_entries(marl_repo: Path) -> None:
     r = cdr(
         "leaderboard", "build", "--check", "--evaluate", "mvp-all", "recip", "--reference", "weave",

@@ -228,6 +228,7 @@ def _public_fingerprints() -> set[str]:
     return out
 
 
+@pytest.mark.slow
 def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path) -> None:
     """An agent that recognises the public episodes (from their first observations) flies well
     on them only: its committed records replay and its re-run agrees, but its score on episodes
@@ -258,6 +259,7 @@ def test_fresh_episodes_catch_an_agent_that_knows_the_public_episodes(repo: Path
     assert "results/direct.json" not in r.stderr and "results/weave" not in r.stderr
 
 
+@pytest.mark.slow
 def test_scored_reset_seeds_are_not_the_public_ones(repo: Path) -> None:
     """The build scores with agent reset seeds derived with a secret key, recorded in the
     result afterwards (so the check can ask the agent again with the same seeds)."""

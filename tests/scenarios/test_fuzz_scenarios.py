@@ -158,6 +158,7 @@ def test_random_bytes(raw):
     _load_file(raw)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.data(), st.sampled_from(sorted(BASES)))
 def test_mutated_shipped_scenarios(data, base):
