@@ -231,7 +231,8 @@ def _run_attempt(trial: Trial, root: Path, final: Path, work: Path, resumed: str
     res_path = work / RESULT_FILE
     res = json.loads(res_path.read_text())
     res["agent"]["path"] = str(final / "agent.py")
-    atomic_write_text(res_path, json.dumps(res, indent=1) + "\n")
+    # compact: landed trials are committed (sweeps/landed/), hundreds of them
+    atomic_write_text(res_path, json.dumps(res, separators=(",", ":")) + "\n")
     record = {
         "key": trial.key,
         "factor": trial.factor,
@@ -250,7 +251,7 @@ def _run_attempt(trial: Trial, root: Path, final: Path, work: Path, resumed: str
         "wall_s": round(time.time() - t0, 2),
         **steps,
     }
-    atomic_write_text(work / TRIAL_FILE, json.dumps(record, indent=1) + "\n")
+    atomic_write_text(work / TRIAL_FILE, json.dumps(record, separators=(",", ":")) + "\n")
     try:
         os.rename(work, final)
     except OSError:  # another attempt of this trial landed first: keep that one
