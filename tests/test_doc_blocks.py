@@ -425,6 +425,21 @@ def check_template(out: str, cwd: Path) -> None:
     assert (cwd / "results" / "template" / "medium.json").is_file()
 
 
+def check_tutorial_test_score(out: str, cwd: Path) -> None:
+    """The command gives the committed test result of the tutorial's policy (the file the
+    tutorial's table is rendered from): the same episodes, the same per-episode records."""
+    from cdr_bench.evaluate.results import read_episodes, read_result
+
+    new, old = cwd / "results" / "test" / "ppo_tutorial.json", ROOT / TUTORIAL_TEST
+    a, b = read_result(new, metrics=False), read_result(old, metrics=False)
+    assert a["scenarios"] == b["scenarios"] and a["agent"]["sha256"] == b["agent"]["sha256"]
+    assert read_episodes(new, a) == read_episodes(old, b)
+    assert a["episodes_sha256"] == b["episodes_sha256"]
+
+
+TUTORIAL_TEST = "agents/ppo_tutorial/analysis/test/result.json"
+
+
 CHECKS: dict[str, Callable[[str, Path], None]] = {
     "cdr-bench scenarios list": check_cli_tour,
     "python docs/tutorials/evaluate_your_agent.py": check_evaluate_tutorial,
@@ -433,6 +448,7 @@ CHECKS: dict[str, Callable[[str, Path], None]] = {
     "python docs/tutorials/ppo_vector_env.py --total-timesteps": check_ppo_tutorial,
     "python docs/tutorials/rllib_ppo.py --iterations": check_rllib_tutorial,
     "cdr-bench evaluate agents/template/agent.py": check_template,
+    "cdr-bench evaluate agents/ppo_tutorial --scenario high": check_tutorial_test_score,
     "cdr-bench train ippo --scenario marl/high-all": check_shared_policy_tutorial,
 }
 """Commands whose output is checked beyond their exit status (key: a part of the block)."""

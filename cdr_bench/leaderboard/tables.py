@@ -646,6 +646,74 @@ DESIGN_RUNS = ("default-26k", "default-40k", "linear", "ce-none", "ce-noise")
 """Short Diffusion-AC runs of the schedule and terminal-CE experiments."""
 
 
+TUTORIAL = ("agents/ppo_tutorial/analysis/test", "agents/ppo_tutorial/training_log.jsonl.xz")
+"""The PPO tutorial's shipped policy scored once on the test episodes of ``high``
+(``cdr-bench evaluate ... --split test --out <folder>/result.json``; not a leaderboard entry)
+and its training log."""
+TUTORIAL_REFERENCES = ("direct", "mvp", "maskable-ppo")
+"""The entries the tutorial's policy is compared with (every training seed of a learned one)."""
+
+
+def tutorial_test(repo: Repo) -> str:
+    """The tutorial's policy against each reference entry (each seed of a learned one) on the
+    same test episodes of ``high``: both clean-success rates, the paired difference with its
+    95 % paired bootstrap interval and McNemar's exact test
+    (:func:`cdr_bench.evaluate.compare.compare`, as ``cdr-bench compare`` prints it), then the
+    tutorial's success and LoS rates and its training time (the training log's last line)."""
+    from cdr_bench.evaluate.compare import compare
+
+    folder, log = TUTORIAL
+    ours = repo.root / folder / "result.json"
+    runs: list[tuple[str, Path]] = []
+    for name in TUTORIAL_REFERENCES:
+        sub = repo.submission(name)
+        seeds = [
+            (sub.seed, name),
+            *((int(v.name.rsplit("-", 1)[1]), v.name) for v in sub.seed_views()),
+        ]
+        for seed, run in seeds:
+            label = repo.label(name) + ("" if seed is None else f", seed {seed}")
+            runs.append((label, result_path(repo.results_dir, run)))
+    head = [
+        "compared with (same 1000 test episodes of `high`)",
+        "its clean success",
+        "tutorial's clean success",
+        "difference",
+        "95 % paired interval",
+        "McNemar p",
+    ]
+    rows: Rows = []
+    last: dict[str, float] = {}
+    for label, path in runs:
+        try:
+            cmp = compare(path, ours, scenarios=["high"])
+        except UserError as e:
+            raise UserError(f"{folder}/result.json: {e}") from None
+        by = {r["metric"]: r for r in cmp["rows"] if r["aircraft"] == "ownship"}
+        r = by["clean_success_rate"]
+        last = {k: by[k]["b"] for k in ("clean_success_rate", "success_rate", "los_rate")}
+        lo, hi = r["ci95"]
+        rows.append(
+            [
+                Cell(label),
+                Cell(f"{100 * r['a']:.1f} %", r["a"]),
+                Cell(f"{100 * r['b']:.1f} %", r["b"]),
+                Cell(f"{100 * r['diff']:+.1f}" + (" *" if r["significant"] else ""), r["diff"]),
+                Cell(f"[{100 * lo:+.1f}, {100 * hi:+.1f}]"),
+                Cell(f"{r['mcnemar']['p']:.2g}"),
+            ]
+        )
+    final = _read_jsonl(repo.root / log)[-1]
+    note = (
+        f"The tutorial's policy on these episodes: clean success "
+        f"{100 * last['clean_success_rate']:.1f} %, success {100 * last['success_rate']:.1f} %, "
+        f"LoS {100 * last['los_rate']:.1f} %; trained in {final['train_minutes']:.1f} minutes "
+        f"({final['global_step']:,} environment steps, `{log}`). *: the interval excludes 0 "
+        f"(each comparison on its own, without a correction for the {len(rows)} of them)."
+    )
+    return md_table(head, rows, numeric_from=1) + "\n\n" + note
+
+
 def headline(repo: Repo) -> str:
     """The leaderboard's generated conclusion and its ranking by the headline score, from the
     committed ``leaderboard.json`` (the same functions as the leaderboard's pages)."""
@@ -718,6 +786,7 @@ DOC_BLOCKS: dict[str, dict[str, Block]] = {
     },
     "agents/ippo/README.md": {"seeds": lambda r: system_seeds(r, ["ippo", "mvp-all"])},
     "agents/mappo/README.md": {"seeds": lambda r: system_seeds(r, ["mappo", "mvp-all"])},
+    "docs/tutorials/ppo-vector-env.md": {"test": tutorial_test},
 }
 """File (relative to the repository root) -> block name -> what renders it."""
 
