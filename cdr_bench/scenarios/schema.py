@@ -281,9 +281,22 @@ class TrafficConfig:
 
 @dataclass(frozen=True)
 class LearningIntruder:
-    """A learning aircraft that flies its airway from start to end as its goal."""
+    """A learning aircraft: it flies its airway from start to end as its goal, or it is placed
+    by an ``encounter`` with the ownship (as a placed background aircraft is) and its goal lies
+    on its track as far past the encounter as it starts before it (twice the time to CPA)."""
 
-    airway: int = _spec("index into 'airways'", 0, MAX_AIRWAYS - 1)
+    airway: int | None = _spec(
+        "index into 'airways' (unless 'encounter')",
+        0,
+        MAX_AIRWAYS - 1,
+        unless="encounter",
+        default=None,
+    )
+    encounter: Encounter | None = _spec(
+        "placed relative to the ownship's straight flight, drawn per episode, its goal at twice "
+        "the time to CPA along its track (needs ownship.start; instead of airway)",
+        default=None,
+    )
 
 
 @dataclass(frozen=True)
@@ -356,6 +369,10 @@ class ScenarioConfig:
             default = next(f for f in dataclasses.fields(TrafficConfig) if f.name == name).default
             if part.get(name) == default:
                 del part[name]
+        for li in out["learning_intruders"]:  # an airway, or (added later) an encounter
+            for name in ("airway", "encounter"):
+                if li.get(name) is None:
+                    del li[name]
         return out
 
     def config_hash(self) -> str:
@@ -648,10 +665,12 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
             )
         )
     for i, li in enumerate(cfg.learning_intruders):
-        if li.airway >= len(cfg.airways):
+        if li.airway is not None and li.airway >= len(cfg.airways):
             out.append(
                 (f"learning_intruders[{i}].airway", f"expected an index below {len(cfg.airways)}")
             )
+        if li.encounter is not None:
+            out += _encounter_problems(cfg, li.encounter, f"learning_intruders[{i}].encounter")
     for i, a in enumerate(cfg.airways):
         if math.dist(a.start_km, a.end_km) < 1.0:
             out.append((f"airways[{i}]", "expected distinct start and end"))

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from cdr_bench.actions import N_ACTIONS, action_mask
 from cdr_bench.errors import ScenarioError
-from cdr_bench.scenarios.schema import ScenarioConfig, range_bounds
+from cdr_bench.scenarios.schema import Encounter, ScenarioConfig, range_bounds
 from cdr_bench.sim import kernels as k
 from cdr_bench.sim.geometry import exact_unit_vector, heading_deg
 from cdr_bench.sim.observation import observation_bounds
@@ -123,6 +123,28 @@ class StepResult:
         return self.terms[..., 5] + self.terms[..., 6]
 
 
+def _encounter_rows(
+    encounters: list[Encounter | None],
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The kernels' encounter tables (``x_enc`` and ``x_enc_level``, or ``li_enc`` and
+    ``li_enc_level``): one row per aircraft, zero for one not placed by an encounter."""
+    enc_rows = np.zeros((len(encounters), k.N_ENC_PARAMS))
+    level_rows = np.zeros((len(encounters), 4), dtype=np.int64)
+    for i, enc in enumerate(encounters):
+        if enc is None:
+            continue
+        enc_rows[i, k.X_HAS] = 1.0
+        enc_rows[i, k.X_T_LO], enc_rows[i, k.X_T_HI] = range_bounds(enc.time_to_cpa_s)
+        enc_rows[i, k.X_A_LO], enc_rows[i, k.X_A_HI] = range_bounds(enc.angle_deg)
+        enc_rows[i, k.X_M_LO], enc_rows[i, k.X_M_HI] = range_bounds(enc.miss_km)
+        enc_rows[i, k.X_S_LO], enc_rows[i, k.X_S_HI] = range_bounds(enc.speed_kt)
+        enc_rows[i, k.X_MIRROR] = float(enc.mirror)
+        levels = enc.level if isinstance(enc.level, tuple) else (enc.level,)
+        level_rows[i, 0] = len(levels)
+        level_rows[i, 1 : 1 + len(levels)] = levels
+    return enc_rows, level_rows
+
+
 def _placed_aircraft(cfg: ScenarioConfig) -> dict[str, NDArray[Any]]:
     """The kernels' tables of the scenario's placed aircraft (the ``x_*`` fields of
     :class:`~cdr_bench.sim.kernels.Constants`), one row each: position, heading vector, speed
@@ -133,27 +155,15 @@ def _placed_aircraft(cfg: ScenarioConfig) -> dict[str, NDArray[Any]]:
     x_dir = np.zeros((X, 2))
     x_speed = np.zeros(X)
     x_level = np.zeros(X, dtype=np.int64)
-    x_enc = np.zeros((X, k.N_ENC_PARAMS))
-    x_enc_level = np.zeros((X, 4), dtype=np.int64)
     for i, a in enumerate(cfg.aircraft):
-        enc = a.encounter
-        if enc is None:  # fixed (the schema requires every value)
+        if a.encounter is None:  # fixed (the schema requires every value)
             assert a.position_km is not None and a.heading_deg is not None
             assert a.speed_kt is not None and a.level is not None
             x_pos[i] = a.position_km
             x_dir[i] = exact_unit_vector(a.heading_deg)
             x_speed[i] = a.speed_kt * KM_PER_S_PER_KT
             x_level[i] = a.level
-            continue
-        x_enc[i, k.X_HAS] = 1.0
-        x_enc[i, k.X_T_LO], x_enc[i, k.X_T_HI] = range_bounds(enc.time_to_cpa_s)
-        x_enc[i, k.X_A_LO], x_enc[i, k.X_A_HI] = range_bounds(enc.angle_deg)
-        x_enc[i, k.X_M_LO], x_enc[i, k.X_M_HI] = range_bounds(enc.miss_km)
-        x_enc[i, k.X_S_LO], x_enc[i, k.X_S_HI] = range_bounds(enc.speed_kt)
-        x_enc[i, k.X_MIRROR] = float(enc.mirror)
-        levels = enc.level if isinstance(enc.level, tuple) else (enc.level,)
-        x_enc_level[i, 0] = len(levels)
-        x_enc_level[i, 1 : 1 + len(levels)] = levels
+    x_enc, x_enc_level = _encounter_rows([a.encounter for a in cfg.aircraft])
     return {
         "x_pos": x_pos,
         "x_dir": x_dir,
@@ -265,8 +275,13 @@ class Simulator:
 
         li = cfg.learning_intruders
         L = len(li)
-        li_start = np.array([cfg.airways[x.airway].start_km for x in li], float).reshape(L, 2)
-        li_goal = np.array([cfg.airways[x.airway].end_km for x in li], float).reshape(L, 2)
+        li_start = np.zeros((L, 2))
+        li_goal = np.zeros((L, 2))
+        for i, x in enumerate(li):
+            if x.airway is not None:
+                li_start[i] = cfg.airways[x.airway].start_km
+                li_goal[i] = cfg.airways[x.airway].end_km
+        li_enc, li_enc_level = _encounter_rows([x.encounter for x in li])
         li_vec = li_goal - li_start
         li_len = np.sqrt(li_vec[:, 0] * li_vec[:, 0] + li_vec[:, 1] * li_vec[:, 1])
         own = np.zeros(9)
@@ -295,6 +310,8 @@ class Simulator:
             li_start=li_start,
             li_goal=li_goal,
             li_dir=li_vec / np.maximum(li_len, 1e-9)[:, None],
+            li_enc=li_enc,
+            li_enc_level=li_enc_level,
             own_fixed=own,
             per_route=self.per_route,
             C=self.C,

@@ -177,6 +177,11 @@ class Constants(NamedTuple):
     """(L, 2) their goals (their airway's exit), km"""
     li_dir: np.ndarray
     """(L, 2) their heading vectors"""
+    li_enc: np.ndarray
+    """(L, 10) a learning intruder placed by an encounter with the ownship instead (indices
+    ``X_*``; ``X_HAS`` = 0: on its airway, the three rows above)"""
+    li_enc_level: np.ndarray
+    """(L, 4) the levels its encounter draws from: count, then the levels"""
     own_fixed: np.ndarray
     """(9,) an explicit ownship start, indices ``O_*``"""
     per_route: int
@@ -312,18 +317,21 @@ def sin_cos_deg(angle_deg):
 # Reset
 
 
-@njit(cache=True)
-def _place_encounter(e, rs, s, c, i, b):
-    """Explicit aircraft ``i`` (background slot ``b``) by its encounter with the ownship's
-    straight flight (docs/model.md §8.3). Six draws, always in this order: time to CPA, angle,
-    miss distance, speed, level, mirror."""
-    t = _uniform(rs, c.x_enc[i, X_T_LO], c.x_enc[i, X_T_HI])
-    angle = _uniform(rs, c.x_enc[i, X_A_LO], c.x_enc[i, X_A_HI])
-    miss = _uniform(rs, c.x_enc[i, X_M_LO], c.x_enc[i, X_M_HI])
-    speed = _uniform(rs, c.x_enc[i, X_S_LO], c.x_enc[i, X_S_HI]) * KM_PER_S_PER_KT
-    level = c.x_enc_level[i, 1 + _below(rs, c.x_enc_level[i, 0])]
+@njit(cache=True, inline="always")
+def _draw_encounter(rs, c, enc, enc_level):
+    """An aircraft placed by its encounter (``enc``, ``enc_level``: a row of ``x_enc`` and
+    ``x_enc_level``, or of ``li_enc`` and ``li_enc_level``) with the ownship's straight flight
+    (docs/model.md §8.3). Six draws, always in this order: time to CPA, angle, miss distance,
+    speed, level, mirror. Returns its start (x, y) km, velocity (vx, vy) km/s, level, time to
+    CPA (s) and speed (kt)."""
+    t = _uniform(rs, enc[X_T_LO], enc[X_T_HI])
+    angle = _uniform(rs, enc[X_A_LO], enc[X_A_HI])
+    miss = _uniform(rs, enc[X_M_LO], enc[X_M_HI])
+    speed_kt = _uniform(rs, enc[X_S_LO], enc[X_S_HI])
+    speed = speed_kt * KM_PER_S_PER_KT
+    level = enc_level[1 + _below(rs, enc_level[0])]
     flip = _below(rs, 2)
-    if c.x_enc[i, X_MIRROR] != 0.0 and flip == 1:
+    if enc[X_MIRROR] != 0.0 and flip == 1:
         angle = -angle
         miss = -miss
     ux, uy = c.own_fixed[O_DIR_X], c.own_fixed[O_DIR_Y]  # the ownship's heading vector
@@ -344,8 +352,16 @@ def _place_encounter(e, rs, s, c, i, b):
     # At time t the ownship is at start + v0 t and this aircraft ``miss`` across from it.
     cx = c.own_fixed[O_X] + ux * v0 * t + miss * nx
     cy = c.own_fixed[O_Y] + uy * v0 * t + miss * ny
-    s.pos[e, b, 0] = cx - vx * t
-    s.pos[e, b, 1] = cy - vy * t
+    return cx - vx * t, cy - vy * t, vx, vy, level, t, speed_kt, dx, dy
+
+
+@njit(cache=True)
+def _place_encounter(e, rs, s, c, i, b):
+    """Explicit aircraft ``i`` (background slot ``b``) by its encounter with the ownship's
+    straight flight (:func:`_draw_encounter`)."""
+    x, y, vx, vy, level, _, _, _, _ = _draw_encounter(rs, c, c.x_enc[i], c.x_enc_level[i])
+    s.pos[e, b, 0] = x
+    s.pos[e, b, 1] = y
     s.vel[e, b, 0] = vx
     s.vel[e, b, 1] = vy
     s.level[e, b] = level
@@ -466,6 +482,26 @@ def _place_controlled(e, rs, s, c, B):
     M = s.ac_dir.shape[1]
     perm = np.empty(N_LEVELS, dtype=np.int64)
     for k in range(1, 1 + c.li_start.shape[0]):
+        if c.li_enc[k - 1, X_HAS] != 0.0:
+            # By its encounter with the ownship's straight flight; its goal lies on its track
+            # as far past the encounter as it starts before it (twice the time to CPA). A start
+            # within the start clearance of the ownship's at its level: draw again.
+            x, y, vx, vy, lv, t, speed_kt, dx, dy = _draw_encounter(
+                rs, c, c.li_enc[k - 1], c.li_enc_level[k - 1]
+            )
+            if lv == int(c.own_fixed[O_LEVEL]):
+                ox, oy = x - c.own_fixed[O_X], y - c.own_fixed[O_Y]
+                if math.sqrt(ox * ox + oy * oy) < clearance:
+                    return False
+            if _near_controlled(e, x, y, clearance, s, B, k):
+                return False
+            s.pos[e, B + k, 0], s.pos[e, B + k, 1] = x, y
+            s.ac_dir[e, k, 0], s.ac_dir[e, k, 1] = dx, dy
+            s.ac_speed[e, k] = speed_kt
+            s.level[e, B + k] = lv
+            s.ac_goal[e, k, 0] = x + vx * (2.0 * t)
+            s.ac_goal[e, k, 1] = y + vy * (2.0 * t)
+            continue
         sx, sy = c.li_start[k - 1, 0], c.li_start[k - 1, 1]
         for i in range(N_LEVELS):
             perm[i] = i
