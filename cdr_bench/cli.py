@@ -53,8 +53,9 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_scenarios_fields)
     p = sc_sub.add_parser(
         "certify",
-        help="certify a tactical scenario: holding fails, several manoeuvre families succeed "
-        "per episode, the MVP resolver solves 30-90 %% (docs/model.md §8.3)",
+        help="certify a tactical or multi-aircraft family: holding fails, several manoeuvre "
+        "families (joint patterns) succeed per episode, the MVP resolver (for every aircraft) "
+        "solves 30-90 %% (docs/model.md §8.3, §8.4.1)",
     )
     p.add_argument("name", help="registry name or YAML path")
     add_episodes_arg(p, 1000, "episodes for holding and the agent (1000)")
@@ -154,7 +155,7 @@ def _scenarios_certify(args: argparse.Namespace) -> int:
     import json
 
     from cdr_bench.evaluate.results import atomic_write_text, check_output_path
-    from cdr_bench.evaluate.search import FAMILIES, certify
+    from cdr_bench.evaluate.search import certify
     from cdr_bench.scenarios import load_scenario
 
     if args.out:
@@ -191,23 +192,29 @@ def _scenarios_certify(args: argparse.Namespace) -> int:
         simple = ", ".join(f"{k} {v}" for k, v in f["simple_manoeuvre_succeeds"].items())
         enough = f", search stopped at {f['enough']} families" if f["enough"] else ""
         print(
-            f"{mark(f['ok'])} (b) manoeuvre families per episode over {f['episodes']} "
+            f"{mark(f['ok'])} (b) {f['kind']} per episode over {f['episodes']} "
             f"episodes{enough}: {dist} (mean {f['mean']:.2f}); >= 2 in "
             f"{pct(f['share_at_least'])}; required {f['required']}  [{f['seconds']} s]"
         )
-        print(f"       episodes with a success, per family: {found}")
-        print(f"       ... by the plain manoeuvre of the family: {simple}")
+        print(f"       episodes with a success, per pattern: {found}")
+        if simple:
+            print(f"       ... by the plain manoeuvre of the family: {simple}")
         for ep in f["per_episode"]:
             if len(ep["families"]) < 2:
                 print(f"       episode {ep['episode']} (seed {ep['seed']}): {ep['families']}")
     if "agent" in r:
         a = r["agent"]
         print(
-            f"{mark(a['ok'])} (c) {a['path']} succeeds in {a['successes']} / {a['episodes']} "
+            f"{mark(a['ok'])} (c) {a['path']} flying {a['flies']} succeeds in "
+            f"{a['successes']} / {a['episodes']} "
             f"episodes ({pct(a['success_rate'])}, 95 % CI {pct(a['ci95'][0])}-"
             f"{pct(a['ci95'][1])}; required {a['required']})  [{a['seconds']} s]"
         )
-    print(f"{'certified' if r['ok'] else 'NOT certified'} (families: {', '.join(FAMILIES)})")
+    names = ", ".join(f["names"]) if f["episodes"] else ""
+    print(
+        f"{'certified' if r['ok'] else 'NOT certified'}"
+        + (f" ({f['kind']}: {names})" if names else "")
+    )
     if args.out:
         atomic_write_text(Path(args.out), json.dumps(r, indent=1) + "\n")
     return 0 if r["ok"] else 1

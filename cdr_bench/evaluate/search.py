@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,25 +92,34 @@ def _follow_on_actions(
     env: VectorEnv, family: dict[str, NDArray[np.float64]], j: int
 ) -> NDArray[np.int64]:
     """Ownship action of every episode ``j`` steps after the first action, shape (E,)."""
+    return manoeuvre_actions(env, {k: v[:, None] for k, v in family.items()}, j)[:, 0]
+
+
+def manoeuvre_actions(
+    env: VectorEnv, family: dict[str, NDArray[np.float64]], j: int
+) -> NDArray[np.int64]:
+    """The follow-on policy's action of every controlled aircraft ``j`` steps into it, shape
+    (E, M); ``family`` holds each parameter of :func:`follow_on_family` per aircraft, arrays
+    broadcastable to (E, M)."""
     turning = j < family["turn_steps"]
     steering = j >= family["turn_steps"] + family["hold_steps"]
     own = env.config.ownship
     # Steer when the goal is more than half a heading step off the nose: with the goal vector g
     # and the heading vector u, cross = |g| sin(off) and dot = |g| cos(off), and off > half
     # exactly when sin(off - half) > 0 with sin(off) > 0 (no angle is computed).
-    g = env.goals_km[:, 0] - env.positions_km[:, 0]
-    u = env.heading_vectors[:, 0]
-    cross = g[:, 0] * u[:, 1] - g[:, 1] * u[:, 0]  # + : goal to the right
-    dot = g[:, 0] * u[:, 0] + g[:, 1] * u[:, 1]
+    g = env.goals_km - env.positions_km
+    u = env.heading_vectors
+    cross = g[..., 0] * u[..., 1] - g[..., 1] * u[..., 0]  # + : goal to the right
+    dot = g[..., 0] * u[..., 0] + g[..., 1] * u[..., 1]
     s_half, c_half = exact_unit_vector(0.5 * own.heading_step_deg)
     right = (cross > 0.0) & (cross * c_half - dot * s_half > 0.0)
     left = (cross < 0.0) & (-cross * c_half - dot * s_half > 0.0)
     steer = np.where(right, 1, np.where(left, -1, 0))
     a_psi = np.where(turning, family["turn"], np.where(steering, steer, 0))
-    dv = family["speed_kt"] - env.speeds_kt[:, 0]
+    dv = family["speed_kt"] - env.speeds_kt
     a_v = np.where(np.abs(dv) > 0.5 * own.speed_step_kt, np.sign(dv), 0)
     target_level = np.where(steering, family["final_level"], family["level"])
-    a_h = np.sign(target_level - env.levels[:, 0])
+    a_h = np.sign(target_level - env.levels)
     return (9 * (a_psi + 1) + 3 * (a_v + 1) + (a_h + 1)).astype(np.int64)
 
 
@@ -382,6 +391,115 @@ def search_families(
 
 
 # ----------------------------------------------------------------------------------------------
+# Multi-aircraft encounters (docs/model.md §8.4.1): the controlled aircraft searched together
+
+JOINT_PATTERNS = (
+    "all right",
+    "all left",
+    "ownship right",
+    "ownship left",
+    "others right",
+    "others left",
+)
+"""Joint manoeuvre patterns: which controlled aircraft turn (every one, the ownship alone, or
+every one but the ownship) and which way; the others fly straight on toward their goals."""
+JOINT_GRID = tuple(itertools.product(TURN_STEPS, HOLD_STEPS))
+"""(turn steps, hold steps) of each follow-on of a joint pattern (24)."""
+
+
+def joint_grid(pattern: str, M: int) -> dict[str, NDArray[np.float64]]:
+    """The follow-ons of a joint pattern for ``M`` controlled aircraft, arrays (G, M): one row
+    per (turn steps, hold steps) of :data:`TURN_STEPS` x :data:`HOLD_STEPS`, the same for every
+    turning aircraft (turn that way, hold the heading reached, steer back to the goal); the
+    others steer to their goals from the start. Speed and level are each aircraft's own at the
+    start (filled in by :func:`search_joint`)."""
+    if pattern not in JOINT_PATTERNS:
+        raise UserError(f"unknown joint pattern {pattern!r}; known: {', '.join(JOINT_PATTERNS)}")
+    who, side = pattern.split()
+    m = np.arange(M)
+    turning = m >= 0 if who == "all" else m == 0 if who == "ownship" else m > 0
+    grid = np.array(JOINT_GRID, dtype=float)
+    on = np.broadcast_to(turning.astype(float), (len(grid), M))
+    return {
+        "turn": on * (-1.0 if side == "left" else 1.0),
+        "turn_steps": on * grid[:, :1],
+        "hold_steps": on * grid[:, 1:],
+    }
+
+
+@dataclass
+class JointSearch:
+    """What :func:`search_joint` found in one episode."""
+
+    seed: int
+    """the episode seed"""
+    witnesses: dict[str, dict[str, float]]
+    """pattern -> the first (turn steps, hold steps) after which every controlled aircraft
+    reaches its goal"""
+    searched: tuple[str, ...]
+    """the patterns searched (all of them)"""
+
+    @property
+    def families(self) -> list[str]:
+        """The patterns with a witness, in :data:`JOINT_PATTERNS` order."""
+        return [p for p in JOINT_PATTERNS if p in self.witnesses]
+
+
+def search_joint(
+    config: ScenarioConfig,
+    seeds: list[int],
+    patterns: tuple[str, ...] = JOINT_PATTERNS,
+    max_batch: int = 4096,
+) -> list[JointSearch]:
+    """For each episode seed, the joint patterns (:func:`joint_grid`) with a follow-on after
+    which every controlled aircraft reaches its goal (outcome ``SUCCESS``; with
+    ``separation.los_terminates`` a loss of separation ends a flight, so a success is clean).
+    Every (episode, pattern, follow-on) is one episode of a :class:`VectorEnv`, rolled out
+    ``max_batch`` at a time."""
+    M = config.n_controlled
+    grids = [(p, joint_grid(p, M)) for p in patterns]
+    rows = [(i, p, g) for i in range(len(seeds)) for p, _ in grids for g in range(len(JOINT_GRID))]
+    ok = np.zeros(len(rows), dtype=bool)
+    horizon = config.time.max_steps
+    for lo in range(0, len(rows), max_batch):
+        part = rows[lo : lo + max_batch]
+        by_name = dict(grids)
+        fam = {
+            k: np.stack([by_name[p][k][g] for _, p, g in part])
+            for k in ("turn", "turn_steps", "hold_steps")
+        }
+        env = VectorEnv(config, num_envs=len(part))
+        obs, masks = env.reset(seeds=np.asarray([seeds[i] for i, _, _ in part], dtype=np.uint64))
+        fam["speed_kt"] = env.speeds_kt.copy()
+        fam["level"] = fam["final_level"] = env.levels.astype(float)
+
+        def decide(d: Decisions, env: VectorEnv = env, fam: dict = fam) -> NDArray[np.int64]:
+            return manoeuvre_actions(env, fam, d.t)[d.episodes, d.aircraft]
+
+        fly(env, obs, masks, decide, drive="all", max_steps=horizon)
+        ok[lo : lo + len(part)] = (env.outcomes == SUCCESS).all(axis=1)
+    found = [JointSearch(int(s), {}, tuple(patterns)) for s in seeds]
+    for (i, p, g), good in zip(rows, ok, strict=True):
+        if good and p not in found[i].witnesses:
+            k, h = JOINT_GRID[g]
+            found[i].witnesses[p] = {"turn_steps": float(k), "hold_steps": float(h)}
+    return found
+
+
+def _episode_outcome(outcomes: NDArray[np.int8], joint: bool) -> NDArray[np.int8]:
+    """(episodes,) outcome codes from (episodes, M): the ownship's, or with ``joint`` the
+    episode's (``SUCCESS`` when every controlled aircraft succeeded, else the first other
+    outcome in aircraft order)."""
+    if not joint:
+        return outcomes[:, 0]
+    bad = outcomes != SUCCESS
+    first = np.argmax(bad, axis=1)
+    return np.where(bad.any(axis=1), outcomes[np.arange(len(outcomes)), first], SUCCESS).astype(
+        np.int8
+    )
+
+
+# ----------------------------------------------------------------------------------------------
 # Certification of a tactical family (docs/model.md §8.3)
 
 HOLD_FAILS_AT_LEAST = 0.95
@@ -419,21 +537,27 @@ def _simple_follow_on(family_name: str, level: int, speed_kt: float) -> dict[str
 
 
 def hold_outcomes(config: ScenarioConfig, seeds: list[int]) -> NDArray[np.int8]:
-    """Outcome code of the ownship holding course, speed and level (action 13) every step, one
-    per episode seed."""
+    """Outcome codes of every controlled aircraft holding course, speed and level (action 13)
+    every step, (episodes, M): one row per episode seed."""
     env = VectorEnv(config, num_envs=len(seeds))
     obs, masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
-    fly(env, obs, masks, lambda d: HOLD, drive="ownship")
-    return env.outcomes[:, 0].copy()
+    fly(env, obs, masks, lambda d: HOLD, drive="all")
+    return env.outcomes.copy()
 
 
 def agent_outcomes(
-    config: ScenarioConfig, agent_path: str, base_seed: int, n_episodes: int, batch_size: int
+    config: ScenarioConfig,
+    agent_path: str,
+    base_seed: int,
+    n_episodes: int,
+    batch_size: int,
+    drive: Literal["all", "ownship"] = "ownship",
 ) -> NDArray[np.int8]:
-    """Outcome codes of the ownship flown by the agent at ``agent_path`` on the first
-    ``n_episodes`` episodes of the evaluation (same seeds, same batches, same ``reset`` seeds as
-    ``cdr-bench evaluate``; learning intruders, if any, hold). The agent runs IN THIS PROCESS:
-    only for trusted agents such as the shipped ``agents/mvp``."""
+    """Outcome codes of every controlled aircraft, (episodes, M), the ownship flown by the agent
+    at ``agent_path`` on the first ``n_episodes`` episodes of the evaluation (same seeds, same
+    batches, same ``reset`` seeds as ``cdr-bench evaluate``) and, with ``drive="all"``, every
+    other controlled aircraft too (else they hold). The agent runs IN THIS PROCESS: only for
+    trusted agents such as the shipped ``agents/mvp``."""
     from gymnasium import spaces
 
     from cdr_bench.evaluate.loader import load_agent
@@ -450,9 +574,9 @@ def agent_outcomes(
         env = VectorEnv(config, num_envs=len(seeds))
         obs, masks = env.reset(seeds=np.asarray(seeds, dtype=np.uint64))
         agent.reset(batch_seed(base_seed, config.id, chash, b))
-        fly(env, obs, masks, lambda d: np.asarray(agent.act_batch(d.obs, d.masks)), drive="ownship")
-        out.append(env.outcomes[:, 0].copy())
-    return np.concatenate(out) if out else np.zeros(0, dtype=np.int8)
+        fly(env, obs, masks, lambda d: np.asarray(agent.act_batch(d.obs, d.masks)), drive=drive)
+        out.append(env.outcomes.copy())
+    return np.concatenate(out) if out else np.zeros((0, config.n_controlled), dtype=np.int8)
 
 
 def certify(
@@ -495,8 +619,9 @@ def certify(
         "base_seed": base_seed,
     }
 
+    joint = config.n_controlled > 1
     t0 = time.perf_counter()
-    hold = hold_outcomes(config, seeds[:episodes])
+    hold = _episode_outcome(hold_outcomes(config, seeds[:episodes]), joint)
     k = int((hold != SUCCESS).sum())
     report["hold"] = {
         "episodes": episodes,
@@ -509,10 +634,17 @@ def certify(
     }
 
     t0 = time.perf_counter()
-    found = search_families(config, seeds[:search_episodes], enough=enough)
+    found: list[FamilySearch | JointSearch]
+    if joint:
+        found = list(search_joint(config, seeds[:search_episodes]))
+        names: tuple[str, ...] = JOINT_PATTERNS
+        simple: dict[str, int] = {}
+    else:
+        found = list(search_families(config, seeds[:search_episodes], enough=enough))
+        names = FAMILIES
+        simple = _simple_successes(config, seeds[:search_episodes])
     counts = [len(r.families) for r in found]
     at_least = sum(c >= MIN_FAMILIES for c in counts)
-    simple = _simple_successes(config, seeds[:search_episodes])
     report["families"] = {
         "episodes": search_episodes,
         "enough": enough,
@@ -520,23 +652,32 @@ def certify(
             {"episode": i, "seed": r.seed, "families": r.families, "searched": list(r.searched)}
             for i, r in enumerate(found)
         ],
-        "distribution": {str(n): counts.count(n) for n in range(len(FAMILIES) + 1)},
+        "kind": "joint manoeuvre patterns" if joint else "manoeuvre families",
+        "names": list(names),
+        "distribution": {str(n): counts.count(n) for n in range(len(names) + 1)},
         "mean": float(np.mean(counts)) if counts else None,
-        "found": {f: sum(f in r.witnesses for r in found) for f in FAMILIES},
+        "found": {f: sum(f in r.witnesses for r in found) for f in names},
         "simple_manoeuvre_succeeds": simple,
         "share_at_least": at_least / search_episodes if search_episodes else None,
-        "required": f"every episode >= {MIN_FAMILIES} families",
+        "required": f"every episode >= {MIN_FAMILIES} "
+        + ("joint patterns" if joint else "families"),
         "ok": at_least == search_episodes,
         "seconds": round(time.perf_counter() - t0, 2),
     }
 
     if agent is not None:
         t0 = time.perf_counter()
-        outcome = agent_outcomes(config, agent, base_seed, episodes, batch_size)
+        outcome = _episode_outcome(
+            agent_outcomes(
+                config, agent, base_seed, episodes, batch_size, "all" if joint else "ownship"
+            ),
+            joint,
+        )
         k = int((outcome == SUCCESS).sum())
         lo, hi = AGENT_SOLVES
         report["agent"] = {
             "path": str(agent),
+            "flies": "every controlled aircraft" if joint else "the ownship",
             "episodes": episodes,
             "successes": k,
             "success_rate": k / episodes,
