@@ -400,31 +400,72 @@ JOINT_PATTERNS = (
     "ownship left",
     "others right",
     "others left",
+    "ownship slower",
+    "ownship faster",
+    "others slower",
+    "others faster",
 )
-"""Joint manoeuvre patterns: which controlled aircraft turn (every one, the ownship alone, or
-every one but the ownship) and which way; the others fly straight on toward their goals."""
-JOINT_GRID = tuple(itertools.product(TURN_STEPS, HOLD_STEPS))
-"""(turn steps, hold steps) of each follow-on of a joint pattern (24)."""
+"""Joint manoeuvre patterns: which controlled aircraft manoeuvre (every one, the ownship alone,
+or every one but the ownship) and how (turn right or left, fly slower or faster); the others
+fly straight on toward their goals at their start speed."""
+JOINT_TURNS = tuple(itertools.product(TURN_STEPS, HOLD_STEPS))
+"""(turn steps, hold steps) of the follow-ons of a turning pattern (24)."""
+JOINT_SPEEDS = {"slower": (330.0, 380.0), "faster": (480.0, 530.0)}
+"""Target speeds (kt) of the follow-ons of a speed pattern (:data:`SPEEDS_KT` below and above
+the start speed of 430 kt)."""
 
 
 def joint_grid(pattern: str, M: int) -> dict[str, NDArray[np.float64]]:
-    """The follow-ons of a joint pattern for ``M`` controlled aircraft, arrays (G, M): one row
-    per (turn steps, hold steps) of :data:`TURN_STEPS` x :data:`HOLD_STEPS`, the same for every
-    turning aircraft (turn that way, hold the heading reached, steer back to the goal); the
-    others steer to their goals from the start. Speed and level are each aircraft's own at the
-    start (filled in by :func:`search_joint`)."""
+    """The follow-ons of a joint pattern for ``M`` controlled aircraft, arrays (G, M), one row
+    per follow-on. A turning pattern: one row per (turn steps, hold steps) of
+    :data:`JOINT_TURNS`, the same for every manoeuvring aircraft (turn that way, hold the
+    heading reached, steer back to the goal). A speed pattern: one row per target speed of
+    :data:`JOINT_SPEEDS` (the manoeuvring aircraft change speed one step per step toward it and
+    steer to their goals). The others steer to their goals from the start. ``speed_kt`` is NaN
+    where an aircraft keeps its start speed, and every aircraft keeps its start level (both
+    filled in by :func:`search_joint`)."""
     if pattern not in JOINT_PATTERNS:
         raise UserError(f"unknown joint pattern {pattern!r}; known: {', '.join(JOINT_PATTERNS)}")
-    who, side = pattern.split()
+    who, how = pattern.split()
     m = np.arange(M)
-    turning = m >= 0 if who == "all" else m == 0 if who == "ownship" else m > 0
-    grid = np.array(JOINT_GRID, dtype=float)
-    on = np.broadcast_to(turning.astype(float), (len(grid), M))
+    moving = m >= 0 if who == "all" else m == 0 if who == "ownship" else m > 0
+    if how in JOINT_SPEEDS:
+        speeds = np.array(JOINT_SPEEDS[how])[:, None]
+        zero = np.zeros((len(speeds), M))
+        return {
+            "turn": zero,
+            "turn_steps": zero,
+            "hold_steps": zero,
+            "speed_kt": np.where(moving[None, :], speeds, np.nan),
+        }
+    grid = np.array(JOINT_TURNS, dtype=float)
+    on = np.broadcast_to(moving.astype(float), (len(grid), M))
     return {
-        "turn": on * (-1.0 if side == "left" else 1.0),
+        "turn": on * (-1.0 if how == "left" else 1.0),
         "turn_steps": on * grid[:, :1],
         "hold_steps": on * grid[:, 1:],
+        "speed_kt": np.full((len(grid), M), np.nan),
     }
+
+
+def joint_witness(pattern: str, row: int) -> dict[str, float]:
+    """The parameters of follow-on ``row`` of a pattern (:func:`joint_grid`)."""
+    how = pattern.split()[1]
+    if how in JOINT_SPEEDS:
+        return {"speed_kt": JOINT_SPEEDS[how][row]}
+    k, h = JOINT_TURNS[row]
+    return {"turn_steps": float(k), "hold_steps": float(h)}
+
+
+def joint_follow_ons(
+    env: VectorEnv, grid: dict[str, NDArray[np.float64]]
+) -> dict[str, NDArray[np.float64]]:
+    """``grid`` rows (E, M) of :func:`joint_grid` completed for ``env`` just reset: the start
+    speed where none is given, the start level throughout (for :func:`manoeuvre_actions`)."""
+    fam = {k: v for k, v in grid.items() if k != "speed_kt"}
+    fam["speed_kt"] = np.where(np.isnan(grid["speed_kt"]), env.speeds_kt, grid["speed_kt"])
+    fam["level"] = fam["final_level"] = env.levels.astype(float)
+    return fam
 
 
 @dataclass
@@ -434,8 +475,8 @@ class JointSearch:
     seed: int
     """the episode seed"""
     witnesses: dict[str, dict[str, float]]
-    """pattern -> the first (turn steps, hold steps) after which every controlled aircraft
-    reaches its goal"""
+    """pattern -> the parameters of its first follow-on after which every controlled aircraft
+    reaches its goal (:func:`joint_witness`)"""
     searched: tuple[str, ...]
     """the patterns searched (all of them)"""
 
@@ -457,21 +498,18 @@ def search_joint(
     Every (episode, pattern, follow-on) is one episode of a :class:`VectorEnv`, rolled out
     ``max_batch`` at a time."""
     M = config.n_controlled
-    grids = [(p, joint_grid(p, M)) for p in patterns]
-    rows = [(i, p, g) for i in range(len(seeds)) for p, _ in grids for g in range(len(JOINT_GRID))]
+    grids = {p: joint_grid(p, M) for p in patterns}
+    rows = [
+        (i, p, g) for i in range(len(seeds)) for p in patterns for g in range(len(grids[p]["turn"]))
+    ]
     ok = np.zeros(len(rows), dtype=bool)
     horizon = config.time.max_steps
     for lo in range(0, len(rows), max_batch):
         part = rows[lo : lo + max_batch]
-        by_name = dict(grids)
-        fam = {
-            k: np.stack([by_name[p][k][g] for _, p, g in part])
-            for k in ("turn", "turn_steps", "hold_steps")
-        }
         env = VectorEnv(config, num_envs=len(part))
         obs, masks = env.reset(seeds=np.asarray([seeds[i] for i, _, _ in part], dtype=np.uint64))
-        fam["speed_kt"] = env.speeds_kt.copy()
-        fam["level"] = fam["final_level"] = env.levels.astype(float)
+        grid = {k: np.stack([grids[p][k][g] for _, p, g in part]) for k in grids[patterns[0]]}
+        fam = joint_follow_ons(env, grid)
 
         def decide(d: Decisions, env: VectorEnv = env, fam: dict = fam) -> NDArray[np.int64]:
             return manoeuvre_actions(env, fam, d.t)[d.episodes, d.aircraft]
@@ -481,8 +519,7 @@ def search_joint(
     found = [JointSearch(int(s), {}, tuple(patterns)) for s in seeds]
     for (i, p, g), good in zip(rows, ok, strict=True):
         if good and p not in found[i].witnesses:
-            k, h = JOINT_GRID[g]
-            found[i].witnesses[p] = {"turn_steps": float(k), "hold_steps": float(h)}
+            found[i].witnesses[p] = joint_witness(p, g)
     return found
 
 

@@ -493,8 +493,11 @@ def _place_controlled(e, rs, s, c, B):
                 ox, oy = x - c.own_fixed[O_X], y - c.own_fixed[O_Y]
                 if math.sqrt(ox * ox + oy * oy) < clearance:
                     return False
-            if _near_controlled(e, x, y, clearance, s, B, k):
-                return False
+            for p in range(1, k):  # the learning intruders placed before it, at its level
+                if s.level[e, B + p] == lv:
+                    px, py = x - s.pos[e, B + p, 0], y - s.pos[e, B + p, 1]
+                    if math.sqrt(px * px + py * py) < clearance:
+                        return False
             s.pos[e, B + k, 0], s.pos[e, B + k, 1] = x, y
             s.ac_dir[e, k, 0], s.ac_dir[e, k, 1] = dx, dy
             s.ac_speed[e, k] = speed_kt

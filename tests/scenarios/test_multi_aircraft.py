@@ -16,12 +16,15 @@ import pytest
 from cdr_bench.errors import UserError
 from cdr_bench.evaluate.rollout import fly
 from cdr_bench.evaluate.search import (
-    JOINT_GRID,
     JOINT_PATTERNS,
+    JOINT_SPEEDS,
+    JOINT_TURNS,
     _episode_outcome,
     agent_outcomes,
     certify,
+    joint_follow_ons,
     joint_grid,
+    joint_witness,
     manoeuvre_actions,
     search_joint,
 )
@@ -35,15 +38,14 @@ ROOT = Path(__file__).resolve().parents[2]
 MVP = ROOT / "agents" / "mvp"
 
 
-def _replay(config, seed: int, pattern: str, turn_steps: float, hold_steps: float) -> np.ndarray:
-    """Outcomes (M,) of one episode flown by one follow-on of a joint pattern, alone."""
+def _replay(config, seed: int, pattern: str, witness: dict[str, float]) -> np.ndarray:
+    """Outcomes (M,) of one episode flown alone by the follow-on of a joint pattern that
+    ``witness`` names."""
     grid = joint_grid(pattern, config.n_controlled)
-    g = JOINT_GRID.index((int(turn_steps), int(hold_steps)))
+    g = next(r for r in range(len(grid["turn"])) if joint_witness(pattern, r) == witness)
     env = VectorEnv(config, num_envs=1)
     obs, masks = env.reset(seeds=np.array([seed], dtype=np.uint64))
-    fam = {k: v[g][None] for k, v in grid.items()}
-    fam["speed_kt"] = env.speeds_kt.copy()
-    fam["level"] = fam["final_level"] = env.levels.astype(float)
+    fam = joint_follow_ons(env, {k: v[g][None] for k, v in grid.items()})
     fly(
         env,
         obs,
@@ -72,7 +74,7 @@ def test_multi_aircraft_family_is_certified(name: str) -> None:
     for found in search_joint(config, seeds):
         assert len(found.families) >= 2
         for pattern, w in found.witnesses.items():
-            out = _replay(config, found.seed, pattern, w["turn_steps"], w["hold_steps"])
+            out = _replay(config, found.seed, pattern, w)
             assert (out == SUCCESS).all(), (pattern, w, out)
 
 
@@ -102,13 +104,18 @@ def test_every_aircraft_holding_and_the_agent_flying_every_aircraft() -> None:
     assert clean_alone - clean_every > 0.15, (clean_alone, clean_every)
 
 
-def test_joint_patterns_are_named_and_turn_the_aircraft_they_say() -> None:
+def test_joint_patterns_are_named_and_move_the_aircraft_they_say() -> None:
     g = joint_grid("others left", 4)
-    assert g["turn"].shape == (len(JOINT_GRID), 4)
+    assert g["turn"].shape == (len(JOINT_TURNS), 4)
     assert (g["turn"][:, 0] == 0).all() and (g["turn"][:, 1:] == -1).all()
     assert (g["turn_steps"][:, 0] == 0).all() and (g["turn_steps"][:, 1:] >= 1).all()
+    assert np.isnan(g["speed_kt"]).all()  # every aircraft keeps its start speed
     g = joint_grid("ownship right", 3)
     assert (g["turn"][:, 0] == 1).all() and (g["turn"][:, 1:] == 0).all()
+    g = joint_grid("ownship slower", 3)
+    assert g["speed_kt"][:, 0].tolist() == list(JOINT_SPEEDS["slower"])
+    assert np.isnan(g["speed_kt"][:, 1:]).all() and (g["turn_steps"] == 0).all()
+    assert joint_witness("others faster", 1) == {"speed_kt": JOINT_SPEEDS["faster"][1]}
     with pytest.raises(UserError, match="unknown joint pattern"):
         joint_grid("everyone up", 3)
 
