@@ -38,11 +38,11 @@ SUITES: dict[str, tuple[str, ...]] = {
         "tactical/crossing",
         "tactical/overtaking",
     ),
-    "marl": ("marl/low-all", "marl/medium-all", "marl/high-all"),
+    "marl": ("marl/low-all", "marl/medium-all", "marl/high-all", "marl/crossing-stack"),
 }
 """Named suites: scenario names, each run at ``PAPER_EPISODES`` episodes unless overridden.
-``marl``: every aircraft controlled at the three densities (the leaderboard's multi-agent
-track)."""
+``marl``: every aircraft controlled at the three densities, then the multi-aircraft encounter
+family (the leaderboard's multi-agent track)."""
 
 BACKENDS = ("local", "ray")
 """Where ``evaluate`` runs its episode batches: local processes or Ray tasks. Backends other
