@@ -97,8 +97,11 @@ class CDREnv(ParallelEnv):
     separation. Optionally, some aircraft are **learning intruders** (``intruder_0``, ...): each
     flies its airway from start to end as its goal, under the same observation, action and reward
     definitions; in the ``marl/*-8``, ``-24`` and ``-all`` scenarios some or all of the airway
-    aircraft are agents (``aircraft_0``, ...), each flying to its airway's end. Every agent is in
-    ``agents`` from ``reset`` and leaves it on the step it finishes (docs/model.md §8.4).
+    aircraft are agents (``aircraft_0``, ...), each flying to its airway's end; in the
+    ``marl/*-stream`` scenarios the aircraft the airways spawn during the episode are agents too.
+    An agent is in ``agents`` from ``reset`` (or, for one spawned later, from the end of the step
+    during which it entered the sky, with its first observation, reward 0 and not done) and
+    leaves it on the step it finishes (docs/model.md §8.4).
     Background traffic is part of the environment, not agents.
 
     | | |
@@ -223,7 +226,10 @@ class CDREnv(ParallelEnv):
     code), the form collectors such as TorchRL's ``PettingZooWrapper`` need: TorchRL makes a
     tensor of every info value and fails on the default infos' dict and string ("Could not infer
     dtype of dict"), so use ``PettingZooWrapper(parallel_env("medium", flat_infos=True),
-    use_mask=True)``. ``render_mode``:
+    use_mask=True)``. With it, ``reset`` also returns an observation and an info for every
+    possible agent, those still to enter included (TorchRL reads each agent's there); with
+    several agents add ``done_on_any=False`` (the episode ends when every agent is done, not
+    the first). ``render_mode``:
     ``"rgb_array"`` (512 x 512 x 3 uint8 top-down picture with legend, scale bar, time and
     outcome) or ``"human"`` (matplotlib window). The picture zooms to the encounter in scenarios
     that place aircraft around the ownship (the tactical ones) and shows the whole sector
@@ -336,16 +342,15 @@ class CDREnv(ParallelEnv):
             episode_seed = int(self._seed_stream.integers(2**63))
         self.episode_seed = int(episode_seed)
         obs, masks = self.vector.reset(seeds=[self.episode_seed])
-        self.agents = list(self.possible_agents)
+        flying = self.vector.flying[0]
+        self.agents = [a for a, f in zip(self.possible_agents, flying, strict=True) if f]
         self._last_result = None
         self._trail = [tuple(self.vector.sim.ac_pos_km[0, 0].tolist())]
-        out = self._observations(self.agents, obs, masks)
-        if self.flat_infos:
-            first = {k: 0.0 for k in FLAT_INFO_KEYS} | {"episode_seed": self.episode_seed}
-            first["min_separation_km"] = float("inf")
-            infos = {a: dict(first) for a in self.agents}
-        else:
-            infos = {a: {"episode_seed": self.episode_seed} for a in self.agents}
+        # flat_infos (TorchRL's collectors): every possible agent has an observation and an info
+        # from reset on, those still to enter too (TorchRL's wrapper reads each agent's there).
+        first = self.possible_agents if self.flat_infos else self.agents
+        out = self._observations(first, obs, masks)
+        infos = {a: self._first_info(0) for a in first}
         if self.render_mode == "human":
             self.render()
         return out, infos
@@ -414,11 +419,38 @@ class CDREnv(ParallelEnv):
             if self.flat_infos:
                 info = _flat(info, row, int(res.outcome[0, m]), self.episode_seed)
             infos[agent] = info
-        if finished:
-            self.agents = [a for a in acting if not (terms[a] or truncs[a])]
+        entered = self._entered(res)
+        for agent in entered:  # aircraft that entered the sky during the step: new agents
+            m = self._index[agent]
+            obs[agent] = {"observation": obs_rows[m], "action_mask": mask_rows[m]}
+            rewards[agent] = 0.0
+            terms[agent] = truncs[agent] = False
+            infos[agent] = self._first_info(step)
+        if finished or entered:
+            self.agents = [a for a in acting if not (terms[a] or truncs[a])] + entered
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def _first_info(self, step: int) -> dict[str, Any]:
+        """The info of an agent's first observation: at ``reset`` (step 0), or at the end of
+        the step during which its aircraft entered (``entered: True``)."""
+        if self.flat_infos:
+            first = {k: 0.0 for k in FLAT_INFO_KEYS} | {"episode_seed": self.episode_seed}
+            first["min_separation_km"] = float("inf")
+            first["step"] = step if step else 0.0  # as in the infos of a step
+            return first
+        return {"episode_seed": self.episode_seed} | (
+            {"entered": True, "step": step} if step else {}
+        )
+
+    def _entered(self, res: StepResult) -> list[str]:
+        """The agents whose aircraft entered the sky during the step (spawned by an airway,
+        ``traffic.controlled_spawns``), in agent order."""
+        if not self.config.traffic.controlled_spawns:
+            return []
+        new = self.vector.flying[0] & ~res.acting[0]
+        return [self.possible_agents[m] for m in np.flatnonzero(new)]
 
     def _partners(self, row: NDArray[np.bool_]) -> list[str]:
         idx = np.flatnonzero(row)

@@ -140,7 +140,10 @@ def agent_ids(config: ScenarioConfig) -> list[str]:
     return (
         ["ownship_0"]
         + [f"intruder_{i}" for i in range(config.n_learning_intruders)]
-        + [f"aircraft_{i}" for i in range(config.traffic.controlled)]
+        + [
+            f"aircraft_{i}"
+            for i in range(config.traffic.controlled + config.traffic.controlled_spawns)
+        ]
     )
 
 

@@ -143,7 +143,7 @@ def headroom_result(
         start, stop = k * batch_size, min((k + 1) * batch_size, n_episodes)
         seeds = [int(s) for s in episode_seeds(base_seed, config.id, chash, start, stop)]
         plans = plan(config, seeds)
-        replay = [[encode_actions(p)] for p in plans]
+        replay = [{"ownship_0": encode_actions(p)} for p in plans]
         got = run_batch(None, config, base_seed, k, batch_size, n_episodes, replay=replay)
         records += got["episodes"]
         if progress:

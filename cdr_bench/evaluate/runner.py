@@ -110,15 +110,16 @@ def run_batch(
     batch_size: int,
     n_episodes: int,
     trace: int = 0,
-    replay: list[list[str]] | None = None,
+    replay: list[dict[str, str]] | None = None,
     agent_key: str = "",
 ) -> dict[str, Any]:
     """Run batch ``batch_index`` of a scenario (episodes on the fixed grid, at most
     ``n_episodes`` in all). Returns ``{"batch", "episodes": [record, ...], "timing": {...}}``,
     plus ``"traces"`` (:func:`_frame`) of the batch's first ``trace`` episodes if ``trace``.
 
-    With ``replay`` (per episode of the batch, per controlled aircraft, the recorded
-    ``actions`` string), the recorded decisions are flown instead of the agent's: the records
+    With ``replay`` (per episode of the batch, the recorded ``actions`` string of each flight
+    by its aircraft id; a flight not recorded never entered the sky), the recorded decisions
+    are flown instead of the agent's: the records
     come out identical to the recorded ones when the recording is honest (raises
     :class:`ReplayMismatch` when an aircraft needs more decisions than recorded, or fewer). An
     ``agent`` given with ``replay`` is asked at every step as usual (same observations, same
@@ -147,14 +148,16 @@ def run_batch(
     n_dec = np.zeros((E, M), dtype=np.int64)
     recorded_n = None
     if replay is not None:
-        if len(replay) != E or any(len(r) != M for r in replay):
+        index = {a: m for m, a in enumerate(ids)}
+        if len(replay) != E or any(not set(r) <= index.keys() for r in replay):
             raise ReplayMismatch(f"the record of batch {batch_index} has another shape")
         recorded_n = np.zeros((E, M), dtype=np.int64)
         for e in range(E):
-            for m in range(M):
-                a = decode_actions(replay[e][m])[:cap]
+            for name, code in replay[e].items():
+                m = index[name]
+                a = decode_actions(code)[:cap]
                 decisions[e, m, : a.size] = a
-                recorded_n[e, m] = len(replay[e][m])
+                recorded_n[e, m] = len(code)
     agree = 0
     asked = 0
     disagreements: list[list[Any]] = []
@@ -192,6 +195,11 @@ def run_batch(
     direct_km = np.maximum(_norm(gap) - goal_radius, 0.0)
     flight_s = np.zeros((E, M))
     start_speed_km_s = env.speeds_kt * KM_PER_S_PER_KT
+    # The step at which each flight entered the sky: 0 for those flying at the start, -1 for
+    # those still to enter (traffic.controlled_spawns; their start, goal and direct route are
+    # taken when they enter), and for any that never does (no record).
+    entered = np.where(env.flying, 0, -1)
+    first_spawn = M - config.traffic.controlled_spawns
     traces = [_trace_head(config, env, start + e, seeds[e], ids, e) for e in range(min(trace, E))]
     for t in traces:
         t["frames"].append(_frame(env, t.pop("_row"), None))
@@ -265,6 +273,10 @@ def run_batch(
         nonlocal prev_los, prev_nmac, in_conflict, conflict_now
         res = step.result
         after_km = env.positions_km
+        if first_spawn < M:
+            new = env.flying & (entered < 0)
+            if new.any():
+                enter_flights(new, after_km)
         los_with, nmac_with = res.los_with, res.nmac_with
         env.conflicts(conflict_now)
         kernels.pair_events(
@@ -282,12 +294,22 @@ def run_batch(
             if res.acting[i].any():
                 t["frames"].append(_frame(env, i, los_now[i].astype(bool)))
 
+    def enter_flights(new: np.ndarray, at_km: np.ndarray) -> None:
+        """Flights that entered the sky during the step: their start, goal and direct route."""
+        entered[new] = episode_steps[np.nonzero(new)[0]]
+        start_km[new] = at_km[new]
+        goal_km[new] = env.goals_km[new]
+        direct_km[new] = np.maximum(_norm(goal_km[new] - at_km[new]) - goal_radius, 0.0)
+        start_speed_km_s[new] = env.speeds_kt[new] * KM_PER_S_PER_KT
+
     fly(env, obs_all, masks_all, decide, on_step=on_step)
 
     episodes = []
     for e in range(E):
         aircraft = []
         for m in range(M):
+            if entered[e, m] < 0:  # never entered the sky: not a flight
+                continue
             sep = float(min_sep[e, m])
             aircraft.append(
                 {
@@ -320,6 +342,8 @@ def run_batch(
             if M > 1:
                 aircraft[-1]["los_events_ac"] = int(los_events_ac[e, m])
                 aircraft[-1]["nmac_events_ac"] = int(nmac_events_ac[e, m])
+            if m >= first_spawn:
+                aircraft[-1]["entered_s"] = round(float(entered[e, m]) * dt_s, 4)
         episodes.append(
             {
                 "episode": start + e,

@@ -565,7 +565,7 @@ def _track_scenarios(src: Path, track: str, scenarios: tuple[str, ...]) -> None:
     headline = TRACK_HEADLINE[track]
     for i, name in enumerate(scenarios):
         c = load_scenario(name)
-        controlled = 1 + c.n_learning_intruders + c.traffic.controlled
+        controlled = c.n_controlled
         if track == "multi-agent" and controlled < 2:
             raise SubmissionError(
                 src,

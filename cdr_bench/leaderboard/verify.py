@@ -108,7 +108,9 @@ def check_batch(
         out.differences.append(f"{scenario} batch {batch}: episodes missing or out of order")
         return out
     try:
-        replay = [[str(a.get("actions", "")) for a in e["aircraft"]] for e in committed]
+        replay = [
+            {str(a.get("id")): str(a.get("actions", "")) for a in e["aircraft"]} for e in committed
+        ]
         key = str(result.get("agent_seed_key", ""))  # the scorer's, recorded after the run
         got = run_batch(agent, config, base_seed, batch, size, n, replay=replay, agent_key=key)
     except (ReplayMismatch, ValueError, KeyError, TypeError) as e:
@@ -139,7 +141,7 @@ def replayed_traces(
     sc = next(s for s in result["scenarios"] if s["id"] == scenario)
     total = int(sc["episodes"])
     first = [e for e in episodes if e.get("scenario") == scenario][: min(size, total)]
-    replay = [[str(a.get("actions", "")) for a in e["aircraft"]] for e in first]
+    replay = [{str(a.get("id")): str(a.get("actions", "")) for a in e["aircraft"]} for e in first]
     got = run_batch(None, _scenario(scenario), base_seed, 0, size, total, trace=n, replay=replay)
     return list(got["traces"])
 

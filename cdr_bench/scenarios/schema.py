@@ -40,6 +40,8 @@ MAX_LEARNING_INTRUDERS = 16
 """Most learning intruders."""
 MAX_CONTROLLED_TRAFFIC = 1024
 """Most controlled airway aircraft (``traffic.controlled``; 64 airways x 16 per airway)."""
+MAX_CONTROLLED_SPAWNS = 1024
+"""Most controlled aircraft entering during an episode (``traffic.controlled_spawns``)."""
 MAX_COORD_KM = 10_000.0
 """Every coordinate is within [-MAX_COORD_KM, MAX_COORD_KM] km (twice the largest sector)."""
 MAX_NAME_CHARS = 128
@@ -277,6 +279,14 @@ class TrafficConfig:
         "aircraft leave",
         default=True,
     )
+    controlled_spawns: int = _spec(
+        "the first N airway spawns of an episode enter as controlled aircraft (new agents "
+        "aircraft_C.., C = traffic.controlled, in the order they enter), each flying to its "
+        "airway's end; later spawns are background (none with spawn: false)",
+        0,
+        MAX_CONTROLLED_SPAWNS,
+        default=0,
+    )
 
 
 @dataclass(frozen=True)
@@ -391,11 +401,17 @@ class ScenarioConfig:
     @property
     def n_controlled(self) -> int:
         """Controlled aircraft (agents) per episode: the ownship, the learning intruders and
-        the controlled airway aircraft (docs/model.md §8.4)."""
-        return 1 + len(self.learning_intruders) + self.traffic.controlled
+        the controlled airway aircraft, those in the sky at the start and those entering
+        later (docs/model.md §8.4)."""
+        t = self.traffic
+        return 1 + len(self.learning_intruders) + t.controlled + t.controlled_spawns
 
 
-OMITTED_AT_DEFAULT = (("traffic", "controlled"), ("traffic", "spawn"))
+OMITTED_AT_DEFAULT = (
+    ("traffic", "controlled"),
+    ("traffic", "spawn"),
+    ("traffic", "controlled_spawns"),
+)
 """(section, field) pairs that :meth:`ScenarioConfig.to_dict` leaves out at their default (all
 in :class:`TrafficConfig`): fields added after results had been published."""
 
@@ -663,6 +679,10 @@ def _cross_problems(cfg: ScenarioConfig) -> Problems:
                 f"expected at most routes x per_route = {cfg.n_route_intruders} (the airway "
                 "aircraft in the sky at the start)",
             )
+        )
+    if cfg.traffic.controlled_spawns and not cfg.traffic.routes:
+        out.append(
+            ("traffic.controlled_spawns", "expected 0 without airway traffic (traffic.routes: 0)")
         )
     for i, li in enumerate(cfg.learning_intruders):
         if li.airway is not None and li.airway >= len(cfg.airways):

@@ -4,7 +4,9 @@ Two kinds of aircraft share the sky:
 
 * **controlled** aircraft (index ``m`` in ``0..M-1``): the ownship (``m = 0``), the learning
   intruders (``m = 1..L``) and the controlled airway aircraft (``m = L+1..``,
-  ``traffic.controlled``). They take one of the 27 actions every step.
+  ``traffic.controlled``, then the ``traffic.controlled_spawns`` that enter later, in the order
+  they enter: not in the sky, with no outcome, until then). They take one of the 27 actions
+  every step.
 * **background** aircraft (index ``b`` in ``0..B-1``): airway traffic (``R`` routes times ``C``
   slots each, first) and explicitly placed aircraft (last). They fly straight at constant speed
   and level and never react.
@@ -267,6 +269,7 @@ class Simulator:
             ),
             (k.P_MAX_STEPS, float(self.max_steps)),
             (k.P_SPAWN, float(cfg.traffic.spawn)),
+            (k.P_CONTROLLED_SPAWNS, float(cfg.traffic.controlled_spawns)),
         ):
             fp[index] = value
         fp.flags.writeable = False

@@ -93,8 +93,9 @@ N_FLAGS = 6
     P_BOUNDARY_MARGIN,
     P_MAX_STEPS,
     P_SPAWN,
-) = range(29)
-N_FLOAT_PARAMS = 29
+    P_CONTROLLED_SPAWNS,
+) = range(30)
+N_FLOAT_PARAMS = 30
 
 # Explicit ownship start (the ``own_fixed`` array; ``has`` = 0 for a random start).
 O_HAS, O_X, O_Y, O_DIR_X, O_DIR_Y, O_SPEED, O_LEVEL, O_GOAL_X, O_GOAL_Y = range(9)
@@ -479,7 +480,7 @@ def _place_controlled(e, rs, s, c, B):
     the boundary clear of traffic and of every controlled aircraft, heading for a random goal).
     False when no clear start was found (the caller redraws the traffic)."""
     clearance = c.fp[P_START_CLEARANCE]
-    M = s.ac_dir.shape[1]
+    M = s.ac_dir.shape[1] - int(c.fp[P_CONTROLLED_SPAWNS])  # those in the sky at the start
     perm = np.empty(N_LEVELS, dtype=np.int64)
     for k in range(1, 1 + c.li_start.shape[0]):
         if c.li_enc[k - 1, X_HAS] != 0.0:
@@ -605,12 +606,40 @@ def reset_episodes(episodes, seeds, s, c):
         if not placed:
             return i
         s.steps[e] = 0
+        first_spawn = M - int(c.fp[P_CONTROLLED_SPAWNS])
         for m in range(M):
             s.ac_outcome[e, m] = RUNNING
+            if m >= first_spawn:  # enters when an airway spawns it (_spawn_traffic)
+                _clear_controlled(e, s, B, m)
+                continue
             s.active[e, B + m] = True
             v = s.ac_speed[e, m] * KM_PER_S_PER_KT
             s.vel[e, B + m, 0] = s.ac_dir[e, m, 0] * v
             s.vel[e, B + m, 1] = s.ac_dir[e, m, 1] * v
+    return -1
+
+
+@njit(cache=True)
+def _clear_controlled(e, s, B, m):
+    """Controlled aircraft ``m`` of episode ``e`` out of the sky, its state zero (a flight that
+    has not entered yet: not flying, outcome RUNNING)."""
+    s.active[e, B + m] = False
+    s.pos[e, B + m, 0], s.pos[e, B + m, 1] = 0.0, 0.0
+    s.vel[e, B + m, 0], s.vel[e, B + m, 1] = 0.0, 0.0
+    s.level[e, B + m] = 0
+    s.ac_dir[e, m, 0], s.ac_dir[e, m, 1] = 0.0, 0.0
+    s.ac_speed[e, m] = 0.0
+    s.ac_goal[e, m, 0], s.ac_goal[e, m, 1] = 0.0, 0.0
+
+
+@njit(cache=True)
+def _next_entering(e, s, B, first):
+    """The first controlled aircraft from ``first`` on that has not entered yet (not in the
+    sky, no outcome), or -1."""
+    M = s.ac_dir.shape[1]
+    for m in range(first, M):
+        if not s.active[e, B + m] and s.ac_outcome[e, m] == RUNNING:
+            return m
     return -1
 
 
@@ -621,14 +650,19 @@ def reset_episodes(episodes, seeds, s, c):
 @njit(cache=True)
 def _spawn_traffic(e, s, c, acting):
     """A due airway spawn enters unless a controlled aircraft that flew this step is within the
-    spawn clearance at the spawn level (it then waits, and enters at the airway start later)."""
+    spawn clearance at the spawn level (it then waits, and enters at the airway start later).
+    While controlled aircraft remain to enter (``traffic.controlled_spawns``), a spawn is the
+    next of them (routes in order within a step); then a background aircraft, unless spawns
+    are off."""
     R = c.route_start.shape[0]
     M = acting.shape[0]
     B = R * c.C + c.x_pos.shape[0]
     step_km = c.fp[P_TRAFFIC_STEP]
     speed = c.fp[P_TRAFFIC_SPEED]
     clearance = c.fp[P_SPAWN_CLEARANCE]
-    if c.fp[P_SPAWN] == 0.0:
+    first_spawn = M - int(c.fp[P_CONTROLLED_SPAWNS])
+    entering = _next_entering(e, s, B, first_spawn) if first_spawn < M else -1
+    if c.fp[P_SPAWN] == 0.0 and entering < 0:
         return
     for r in range(R):
         s.route_last[e, r] += step_km
@@ -648,6 +682,23 @@ def _spawn_traffic(e, s, c, acting):
         s.route_waiting[e, r] = blocked
         if blocked:
             continue
+        if entering >= 0:  # a controlled aircraft enters, flying to the airway's end
+            m = entering
+            s.pos[e, B + m, 0], s.pos[e, B + m, 1] = x, y
+            s.ac_dir[e, m, 0], s.ac_dir[e, m, 1] = c.route_unit[r, 0], c.route_unit[r, 1]
+            s.ac_speed[e, m] = c.fp[P_START_SPEED]
+            v = c.fp[P_START_SPEED] * KM_PER_S_PER_KT
+            s.vel[e, B + m, 0] = c.route_unit[r, 0] * v
+            s.vel[e, B + m, 1] = c.route_unit[r, 1] * v
+            s.level[e, B + m] = lv
+            s.ac_goal[e, m, 0], s.ac_goal[e, m, 1] = c.route_end[r, 0], c.route_end[r, 1]
+            s.active[e, B + m] = True
+            s.route_last[e, r] = arc
+            s.route_count[e, r] += 1
+            entering = _next_entering(e, s, B, m + 1)
+            continue
+        if c.fp[P_SPAWN] == 0.0:
+            return
         slot = -1
         for j in range(c.C):
             if not s.active[e, r * c.C + j]:

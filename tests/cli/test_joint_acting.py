@@ -55,7 +55,7 @@ def test_joint_agent_sees_its_episode_and_is_recorded_as_joint(cdr, tmp_path):  
     remote = load_for(str(agent), config)
     try:
         assert remote.joint
-        replay = [[a["actions"] for a in ep["aircraft"]] for ep in records[:4]]
+        replay = [{a["id"]: a["actions"] for a in ep["aircraft"]} for ep in records[:4]]
         got = run_batch(remote, config, int(result["base_seed"]), 0, 4, 8, replay=replay)
         assert got["agreement"]["agree"] == got["agreement"]["decisions"] > 0
     finally:

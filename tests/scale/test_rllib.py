@@ -34,9 +34,10 @@ def test_spaces_for_every_agent_and_mask_key():
         pytest.fail("episode did not end")
 
 
-@pytest.mark.parametrize("scenario", ["marl/low-2", "marl/high-all"])
+@pytest.mark.parametrize("scenario", ["marl/low-2", "marl/high-all", "marl/low-stream"])
 def test_rllib_env_checker_accepts_it(scenario):
-    """Learning intruders, and every aircraft of the sector controlled (49 agents)."""
+    """Learning intruders, every aircraft of the sector controlled (49 agents), and agents
+    entering as the airways spawn them."""
     from ray.rllib.utils.pre_checks.env import check_multiagent_environments
 
     check_multiagent_environments(CDRMultiAgentEnv({"scenario": scenario}))
