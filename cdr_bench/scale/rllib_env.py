@@ -2,7 +2,7 @@
 
 | | |
 |---|---|
-| Agents | ``ownship_0`` and the scenario's learning intruders ``intruder_0..n-1`` (all possible) |
+| Agents | ``ownship_0``, ``intruder_*``, ``aircraft_*`` (all possible; some enter later) |
 | Observation | ``Dict(observations=Box(obs_dim) float32, action_mask=Box(0, 1, (27,)) float32)`` |
 | Action | ``Discrete(27)`` per agent |
 | Episode end | an agent leaves when done; ``"__all__"`` once no agent is left |
