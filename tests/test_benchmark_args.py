@@ -56,6 +56,7 @@ WHOLE = "expected a whole number >= 1, got 0"
         ("latency", ("--entries", "nobody"), "--entries: no single-agent entry nobody"),
         ("latency", ("--json", "/dev/null"), "--json /dev/null"),
         ("pytest_cpu", ("/nonexistent", "--top", "0"), f"argument --top: {WHOLE}"),
+        ("time_to_clean", ("/nonexistent",), "/nonexistent: no training log there"),
     ],
 )
 def test_bad_arguments_end_in_one_line(script: str, args: tuple[str, ...], message: str) -> None:
